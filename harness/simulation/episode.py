@@ -341,6 +341,8 @@ class SumoEpisode:
         run.committed = True
         if run.index > 0:
             self.close_road(run, now)
+        else:   # the start road is not observed, but a person in control hands back here too
+            self.mode = takeover_decision.hand_back_at_road_end(self.sumo, EGO_ID, run, self.mode, now)
         context = self.tracker.decision_point()
         if context is None:
             return None
@@ -361,6 +363,8 @@ class SumoEpisode:
             log.info("%s: the net has no turn from %s into %s: driving %s between",
                      self.tracker.episode_id, run.road, nxt, " ".join(detour))
         upcoming = self.new_run(run.index + 1, nxt)
+        if run.index == 0:
+            takeover_decision.count_for_first_road(run, upcoming)
         self.runs.append(upcoming)
         if self.roads.crossed_within_a_step(self.sumo, nxt):
             upcoming.time_in = now
@@ -491,9 +495,9 @@ class SumoEpisode:
             along = current.offsets.get(road)   # where the ego's edge starts along the road
             commits = (not current.committed and along is not None
                        and along + position + speed * step >= commit_at)
+            if person is not None:   # on the start road too: a takeover acts in its step everywhere
+                self.person_control(open_run, now, person(now), commits)
             if open_run.index > 0:
-                if person is not None:
-                    self.person_control(open_run, now, person(now), commits)
                 ego = None
                 if not open_run.decided if open_run.incident is None else isnan(open_run.removed_time):
                     ego = EgoState(now, road, position, x, y, speed, lane, result[angle_id], result[accel_id])

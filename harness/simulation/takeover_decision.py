@@ -8,8 +8,10 @@ A synthetic driver decides once per road, h ~ P(takeover | θ, incident) at its 
 - the road's observation closing with the object never in view (the model decides on every road).
 
 A person in a live study takes over and hands back whenever they choose (`apply_request`, asked
-every step). A takeover switches the ego to the manual driving style (driving_style.py) until the
-road's commit point, where `hand_back_at_road_end` returns it to the autopilot. The model engine
+every step, on the start road too). A takeover switches the ego to the manual driving style
+(driving_style.py) until the road's commit point, where `hand_back_at_road_end` returns it to the
+autopilot. The start road is not observed: a takeover on it counts for the first road after it
+(`count_for_first_road`). The model engine
 draws the same decision in participants/driver_step.py `draw_step`.
 """
 
@@ -65,6 +67,16 @@ def apply_request(sumo: Sumo, vehicle_id: str, road: RoadTakeover, request: bool
         road.takeover_end = now
         return hand_back(sumo, vehicle_id)
     return mode
+
+
+def count_for_first_road(start: RoadTakeover, first: RoadTakeover) -> None:
+    """A person's takeover on the start road, which has no observation of its own (model position
+    0), counted for the first road observed after it (`first`, begun at the start road's commit
+    point), as a takeover in a road's closing step counts for the next road: taken over from the
+    takeover's time until its hand-back (the person's, or the start road's commit point's)."""
+    if start.took_over:
+        first.decided = first.took_over = True
+        first.takeover_start, first.takeover_end = start.takeover_start, start.takeover_end
 
 
 def hand_back_at_road_end(sumo: Sumo, vehicle_id: str, road: RoadTakeover, mode: str, now: float) -> str:

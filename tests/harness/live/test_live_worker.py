@@ -356,11 +356,12 @@ def test_by_wheel_on_an_imported_town_the_oncoming_lane_is_the_net_s_reverse_edg
     assert record.summary["end_reason"] == "accepted"
 
 
-# Simulated times of a takeover on the tiny study's route (E-A, A-F, F-G, G-I, ...): on the first
-# road, where it waits for the next road to open (the ego still on E-A); on a road after its
-# junction's choice (A-F, F-G: the open road is already the next one), near enough the junction
-# that the car cannot stop before it (10: it stops in the junction); inside a junction (16, :G_5).
-COASTING_TAKEOVERS = (2.0, 4.0, 8.0, 10.0, 14.0, 16.0)
+# Simulated times of a takeover on the tiny study's route (E-A, A-F, F-G, G-I, ...): on a road
+# after its junction's choice (E-A at 4, A-F, F-G: the open road is already the next one), near
+# enough the junction that the car cannot stop before it (10: it stops in the junction); inside a
+# junction (16, :G_5). (On the start road before its commit point, where the ego is inserted too
+# close to stop short of it, the episode hands back there: test_live_start_road.py.)
+COASTING_TAKEOVERS = (4.0, 8.0, 10.0, 14.0, 16.0)
 
 
 @pytest.mark.parametrize("at", COASTING_TAKEOVERS)
