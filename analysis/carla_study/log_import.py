@@ -80,6 +80,15 @@ EXPECTED_FILES = (WARM_UP_SESSION, *STUDY_SESSIONS)
 CONDITIONS = {0: "aware", 1: "free"}
 
 
+def session_name(driver: int, trial: int, baseline: int) -> str:
+    """A driver's session as the manifest's `missing_sessions` and the import's summary name it:
+    the warm-up as the warm-up (its file's trial 3 and condition are no trial of the study), a
+    study session by its trial and condition."""
+    if (trial, baseline) == WARM_UP_SESSION:
+        return f"driver {driver} warm-up"
+    return f"driver {driver} trial {trial} {CONDITIONS[baseline]}"
+
+
 @dataclass(frozen=True)
 class LogFile:
     path: Path
@@ -462,7 +471,7 @@ def import_carla_logs(
         have = {
             (log.trial, log.baseline) for log in logs if log.driver == d and log.role in ("study", "warmup")
         }
-        missing += [f"driver {d} trial {t} {CONDITIONS[b]}" for t, b in EXPECTED_FILES if (t, b) not in have]
+        missing += [session_name(d, t, b) for t, b in EXPECTED_FILES if (t, b) not in have]
     episodes = pd.DataFrame(episode_rows).sort_values(["participant", "position"], kind="stable")
     order = list(episodes["episode_id"])
     roads = pd.concat(road_frames, ignore_index=True)

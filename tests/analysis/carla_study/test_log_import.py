@@ -172,6 +172,30 @@ def test_warm_up_and_missing_sessions_are_recorded_not_dropped(imported):
     assert "driver 4 trial 2 aware" in manifest["real_study"]["missing_sessions"]
 
 
+def test_a_missing_warm_up_is_named_as_the_warm_up_not_as_a_trial(tmp_path, capsys):
+    """Drivers 3 and 16 of the raw sample have no warm-up log: the import's summary, its --json and
+    the manifest name each as the driver's warm-up (its file's trial 3 is no trial of the study),
+    as does the packaged release's manifest for drivers 8, 24 and 26."""
+    import json
+
+    code, text, err = run_cli(capsys, "import", "carla-logs", str(RAW), "--out", str(tmp_path / "study"),
+                              "--quiet")
+    assert code == 0, err
+    listed = text.split("missing sessions: ")[1].splitlines()[0].split(", ")
+    manifest = json.loads((tmp_path / "study" / "manifest.json").read_text())["real_study"]
+    assert listed == manifest["missing_sessions"]
+    assert [s for s in listed if "warm-up" in s] == ["driver 3 warm-up", "driver 16 warm-up"]
+    assert not [s for s in listed if "trial 3" in s]
+    code, text, err = run_cli(capsys, "import", "carla-logs", str(RAW), "--out", str(tmp_path / "again"),
+                              "--json")
+    assert code == 0, err
+    assert json.loads(text)["missing_sessions"] == listed
+    packaged = json.loads((STUDY / "manifest.json").read_text())["real_study"]["missing_sessions"]
+    assert sorted(s for s in packaged if "warm-up" in s) == ["driver 24 warm-up", "driver 26 warm-up",
+                                                             "driver 8 warm-up"]
+    assert len(packaged) == 10 and all(s.endswith("trial 2 aware") for s in packaged if "warm-up" not in s)
+
+
 SESSION_POSITIONS = {"t1-aware": 0, "t1-free": 1, "t2-aware": 2, "t2-free": 3}   # docs/real_study.md
 
 
