@@ -1,17 +1,19 @@
 // Continuous driving inputs ([live] driving = "continuous"): a steering wheel with pedals or a
-// gamepad through the browser's Gamepad API, calibrated once and remembered by this browser
-// (localStorage), or the keyboard as the fallback. `read(seconds)` gives the controls now:
-// {steer: -1 (full left) .. 1 (full right), throttle: 0..1, brake: 0..1, toggle: true once when
-// the take-over / hand-back button is pressed, source: "wheel" | "gamepad" | "keyboard"}, or null
-// when nothing the study allows ([live] inputs) is there to read.
+// gamepad through the browser's Gamepad API, each device calibrated once and remembered by this
+// browser for its id (localStorage), or the keyboard as the fallback. `read(seconds)` gives the
+// controls now: {steer: -1 (full left) .. 1 (full right), throttle: 0..1, brake: 0..1, toggle:
+// true once when the take-over / hand-back button is pressed, source: "wheel" | "gamepad" |
+// "keyboard"}, or null when nothing the study allows ([live] inputs) is there to read.
 //
 // A device in the browser's "standard" mapping is a gamepad; any other (a wheel's) is a wheel.
 //
-// Without a calibration a gamepad is read in the browser's "standard" mapping (left stick: steer,
-// right trigger: throttle, left trigger: brake, A: take over / hand back). A wheel (G29, G920:
-// their pedals are axes whose resting value differs per model) needs the calibration.
+// A device is read by the calibration saved for its id, else, in the browser's "standard" mapping,
+// as a gamepad (left stick: steer, right trigger: throttle, left trigger: brake, A: take over /
+// hand back). A device in neither (a wheel, G29, G920: its pedals are axes whose resting value
+// differs per model, which the standard layout leaves unread) is not read until it is calibrated:
+// `ask()` says so, and the station offers the calibration.
 
-const STORAGE_KEY = "trustroute.wheel";
+const STORAGE_KEY = "trustroute.wheel";   // {device id: its calibration}
 // A held arrow key turns the wheel KEY_STEER_RATE per second up to full lock at up to
 // KEY_FULL_LOCK_SPEED; faster, both its reach and its rate fall with the square of the speed. The
 // vehicle model's lateral acceleration grows with speed squared times the steering
@@ -22,12 +24,16 @@ const KEY_STEER_RATE = 1.5;       // per second
 const KEY_FULL_LOCK_SPEED = 4.5;  // m/s
 const KEY_CENTRE_RATE = 3.0;      // per second: how fast the wheel comes back when the keys are let go
 
-export function loadCalibration(storage = window.localStorage) {
-  try { return JSON.parse(storage.getItem(STORAGE_KEY) || "null"); } catch { return null; }
+// The calibrations this browser keeps, by device id (an entry that is not one is left out).
+export function loadCalibrations(storage = window.localStorage) {
+  let saved = null;
+  try { saved = JSON.parse(storage.getItem(STORAGE_KEY) || "null"); } catch { /* none kept */ }
+  if (!saved || typeof saved !== "object") return {};
+  return Object.fromEntries(Object.entries(saved).filter(([, c]) => c && typeof c === "object" && c.steer));
 }
 
 function saveCalibration(calibration, storage = window.localStorage) {
-  storage.setItem(STORAGE_KEY, JSON.stringify(calibration));
+  storage.setItem(STORAGE_KEY, JSON.stringify({ ...loadCalibrations(storage), [calibration.id]: calibration }));
 }
 
 const clamp = (value, low, high) => Math.min(Math.max(value, low), high);
@@ -48,10 +54,16 @@ export function padKind(pad) {
   return pad.mapping === "standard" ? "gamepad" : "wheel";
 }
 
+export const UNCALIBRATED = "This wheel has no standard layout and is not calibrated, so it is not read: "
+  + "click Calibrate the wheel and follow the steps.";
+
+// A device is read by its calibration, or in the standard mapping; else not at all.
+const readable = ({ pad, calibration }) => calibration !== null || pad.mapping === "standard";
+
 export class Inputs {
   constructor(allowed = INPUTS) {
     this.allowed = allowed;
-    this.calibration = loadCalibration();
+    this.calibrations = loadCalibrations();
     this.keys = new Set();
     this.keySteer = 0;
     this.buttonDown = false;
@@ -60,22 +72,38 @@ export class Inputs {
     window.addEventListener("blur", () => this.keys.clear());
   }
 
+  // The first device, if the study allows its kind, with the calibration saved for its id (null: none).
+  device() {
+    const pad = firstGamepad();
+    if (!pad || !this.allowed.includes(padKind(pad))) return null;
+    return { pad, calibration: this.calibrations[pad.id] ?? null };
+  }
+
+  // A calibration made now (`Calibration.next`): it reads its device from here on; its button,
+  // held for the last step, is not a press.
+  calibrated(calibration) {
+    this.calibrations[calibration.id] = calibration;
+    this.buttonDown = true;
+  }
+
   // `speed` (m/s): the vehicle's, which the keys' steering follows.
   read(seconds, speed = 0) {
-    const pad = firstGamepad();
-    if (pad && this.allowed.includes(padKind(pad))) return this.fromGamepad(pad);
+    const device = this.device();
+    if (device && readable(device)) return this.fromGamepad(device.pad, device.calibration);
     return this.allowed.includes("keyboard") ? this.fromKeyboard(seconds, speed) : null;
   }
 
-  // What the person is asked to connect when nothing allowed is there ("" when the keyboard is).
-  missing() {
+  // What the person is asked to do ("" when nothing): calibrate the device connected when it
+  // cannot be read, or connect one when nothing the study allows is there.
+  ask() {
+    const device = this.device();
+    if (device) return readable(device) ? "" : UNCALIBRATED;
     if (this.allowed.includes("keyboard")) return "";
     const names = this.allowed.map((kind) => (kind === "wheel" ? "a steering wheel with pedals" : "a gamepad"));
     return `Connect ${names.join(" or ")} to drive: this study does not use the keyboard.`;
   }
 
-  fromGamepad(pad) {
-    const c = this.calibration;
+  fromGamepad(pad, c) {
     const axis = (index) => pad.axes[index] ?? 0;
     const button = (index) => pad.buttons[index] ?? { pressed: false, value: 0 };
     let steer, throttle, brake, pressed;
@@ -145,7 +173,7 @@ export class Calibration {
     const pad = firstGamepad();
     if (!pad) { this.onText("No wheel or gamepad found: connect it and press one of its buttons."); return false; }
     const [name] = STEPS[this.step];
-    if (name === "rest") this.readings.rest = [...pad.axes];
+    if (name === "rest") [this.readings.id, this.readings.rest] = [pad.id, [...pad.axes]];
     else if (name === "button") {
       const index = pad.buttons.findIndex((b) => b.pressed);
       if (index < 0) { this.onText("No button is held: hold it, then press Next."); return false; }
@@ -160,13 +188,14 @@ export class Calibration {
     if (this.step < STEPS.length) { this.onText(STEPS[this.step][1]); return false; }
     const r = this.readings;
     const calibration = {
+      id: r.id,
       steer: { axis: r.left.axis, left: r.left.value, right: r.right.value, centre: r.rest[r.left.axis] },
       throttle: { axis: r.throttle.axis, rest: r.rest[r.throttle.axis], full: r.throttle.value },
       brake: { axis: r.brake.axis, rest: r.rest[r.brake.axis], full: r.brake.value },
       button: r.button,
     };
     saveCalibration(calibration);
-    this.onText("Calibrated: this browser remembers it.");
+    this.onText("Calibrated: this browser remembers it for this device.");
     return calibration;
   }
 }

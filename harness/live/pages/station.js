@@ -7,7 +7,7 @@
 // (buttons or keys). It speaks the websocket protocol of docs/live_studies.md; the HttpOnly
 // participant cookie authenticates the socket. Texts are for the participant: no road ids.
 import { DriverView, webglAvailable } from "./driver_view.js";
-import { Calibration, Inputs } from "./inputs.js";
+import { Calibration, Inputs, UNCALIBRATED } from "./inputs.js";
 import { drawMap } from "./map_view.js";
 import { drawArrow, nextTurn } from "./next_turn.js";
 
@@ -249,15 +249,19 @@ function readInputs() {
   const now = performance.now() / 1000;
   const controls = inputs.read(now - lastRead, latest ? latest.speed : 0);
   lastRead = now;
-  if (!controls) {   // nothing the study allows is connected: say so, with the hand-back rule when due
-    setText($("incident"), [inputs.missing(), handBackDue ? HAND_BACK_DUE : ""].join(" ").trim());
+  // a device to connect or to calibrate first: said, with the hand-back rule when due
+  const ask = inputs.ask();
+  offerCalibration(ask);
+  if (ask) {
+    setText($("incident"), [ask, handBackDue ? HAND_BACK_DUE : ""].join(" ").trim());
     askedForInput = true;
+  } else if (askedForInput) { askedForInput = false; notice(""); }   // connected, or calibrated, now
+  if (!controls) {   // nothing the study allows can be read
     // the episode keeps the last control it was sent: a wheel or pad unplugged with the
     // accelerator down is let go (hands and feet off it), in the input it was read from
     if (sentControl && allowed("steer")) sendControl(now, sentControl.source, 0, 0, 0);
     return;
   }
-  if (askedForInput) { askedForInput = false; notice(""); }   // connected now
   if (controls.toggle) toggle();
   if (!allowed("steer")) { sentControl = null; return; }
   // held, the episode brakes the car whatever the pedals say: they are sent let go
@@ -305,8 +309,27 @@ function setDriving(kind, allowed = ["wheel", "gamepad", "keyboard"]) {
   if (continuous && !allowed.includes("keyboard")) {   // the keys are no help where they are not read
     $("wheel-help").textContent = "In control: steer with the wheel, accelerate and brake with the pedals.";
   }
-  $("calibrate-box").classList.toggle("hidden", !continuous);
+  offerCalibration(inputs ? inputs.ask() : "");
 }
+
+// *Calibrate the wheel* (inputs.js, `Calibration`): on the ready step of a continuous study, and in
+// a drive while the device connected waits for its calibration (`ask`: UNCALIBRATED) or while one
+// is under way; the ready step says beside it when the device waits for it.
+function offerCalibration(ask) {
+  const calibrating = !$("calibrate-next").classList.contains("hidden");
+  const wanted = ask === UNCALIBRATED;
+  const shown = state.phase === "ready" || (inDrive(state.phase) && (wanted || calibrating));
+  const box = $("calibrate-box");
+  box.classList.toggle("hidden", !continuous || !shown);
+  // in a drive below the view, so the view the person watches does not move
+  const before = inDrive(state.phase) ? document.querySelector("#drive-step .trust-now") : $("trial-text");
+  if (box.nextElementSibling !== before) before.before(box);
+  const text = $("calibration-text");
+  const said = state.phase === "ready" && wanted ? UNCALIBRATED : "";
+  if (!calibrating && (said || text.textContent === UNCALIBRATED)) setText(text, said);
+}
+// the ready step runs no animation loop to read the device: it is looked at twice a second
+setInterval(() => { if (inputs && state.phase === "ready") offerCalibration(inputs.ask()); }, 500);
 
 let calibration = null;
 $("calibrate").addEventListener("click", () => {
@@ -315,7 +338,7 @@ $("calibrate").addEventListener("click", () => {
 });
 $("calibrate-next").addEventListener("click", () => {
   const done = calibration && calibration.next();
-  if (done) { inputs.calibration = done; $("calibrate-next").classList.add("hidden"); }
+  if (done) { inputs.calibrated(done); $("calibrate-next").classList.add("hidden"); }
 });
 
 function setView(kind) {
@@ -378,6 +401,7 @@ const inDrive = (phase) => phase === "driving" || phase === "paused";
 function onState(message) {
   const resumed = state.phase === "paused" && message.phase === "driving";
   state = message;
+  if (inputs) offerCalibration(inputs.ask());
   if (resumed && mode === "manual" && !continuous) send({ type: "drive", pedal });
   updateControls();
   // a new trial starts driving: the last trial's frame, speed and mode go at once (its SUMO takes

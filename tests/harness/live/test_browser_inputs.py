@@ -1,8 +1,9 @@
 """The inputs a study allows, in a real browser: `[live] inputs = ["wheel"]` on a continuous study.
 Debian's Chromium (software WebGL) against `trustroute live`: once in control with no wheel
 connected, the station asks for one and sends no control; a gamepad (the browser's standard
-mapping) is not read either; a wheel (another mapping) drives, and every control the page sends
-names it as its input."""
+mapping) is not read either; a wheel (another mapping) is not read until it is calibrated, which
+the station asks for in the drive and offers there; calibrated, it drives, and every control the
+page sends names it as its input."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from benchmarks.bench_live import start_live_server
 from tests.browser import chromium_executable
 
 from .test_browser import CHROMIUM_ARGS, create_participant
+from .test_browser_station_controls import DEVICES, SET_DEVICES, calibrate_wheel, gamepad, wheel
 
 pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 
@@ -29,15 +31,6 @@ conditions = ["free"]
 [live]
 driving = "continuous"
 inputs = ["wheel"]
-"""
-# a device whose mapping the page reads from window.pad (none until a test sets it)
-VIRTUAL_DEVICE = """
-window.pad = null;
-navigator.getGamepads = () => window.pad === null ? [] : [{
-  id: "virtual", index: 0, connected: true, mapping: window.pad.mapping, timestamp: performance.now(),
-  axes: [0, -1, 1, 1], buttons: Array.from({ length: 17 }, (_, i) => ({
-    pressed: false, touched: false, value: i === 7 ? window.pad.throttle : 0 })),
-}];
 """
 
 
@@ -76,7 +69,7 @@ def test_a_wheel_only_study_reads_only_a_wheel(tmp_path):
                 link = create_participant(browser, address, token)
                 page = browser.new_context(viewport={"width": 640, "height": 480}).new_page()
                 page.set_default_timeout(60_000)
-                page.add_init_script(VIRTUAL_DEVICE)
+                page.add_init_script(DEVICES)   # none until the test connects one
                 errors: list[str] = []
                 page.on("pageerror", lambda error: errors.append(str(error)))
                 page.on("websocket", lambda socket: socket.on(
@@ -90,11 +83,16 @@ def test_a_wheel_only_study_reads_only_a_wheel(tmp_path):
                 asked = "Connect a steering wheel with pedals to drive"
                 expect(page.locator("#incident")).to_contain_text(asked)
                 page.screenshot(path=tmp_path / "no-wheel.png")
-                page.evaluate("window.pad = {mapping: 'standard', throttle: 1}")   # a gamepad
+                page.evaluate(SET_DEVICES, [gamepad(throttle=1.0)])
                 manual_for(page, 1.0)
                 expect(page.locator("#incident")).to_contain_text(asked)
                 assert not [message for message in sent if message["type"] == "control"]
-                page.evaluate("window.pad = {mapping: '', throttle: 1}")   # a wheel
+                page.evaluate(SET_DEVICES, [wheel(throttle=1.0)])   # not calibrated: not read
+                manual_for(page, 1.0)
+                expect(page.locator("#incident")).to_contain_text("not calibrated")
+                assert not [message for message in sent if message["type"] == "control"]
+                calibrate_wheel(page)   # in the drive, where the station offers it
+                page.evaluate(SET_DEVICES, [wheel(throttle=1.0)])
                 deadline = time.monotonic() + 60
                 while not [message for message in sent if message["type"] == "control"]:
                     assert time.monotonic() < deadline, ("no control was sent for the wheel", errors)

@@ -1,6 +1,6 @@
 """The station's driving controls in real Chromium (a gamepad read through the Gamepad API, a
-wheel's pedals, the arrow keys), the websocket answered by the test with the server's messages as
-in test_browser_station.py.
+wheel's pedals, each device by its own calibration or the standard mapping, the arrow keys), the
+websocket answered by the test with the server's messages as in test_browser_station.py.
 
 Never skips: without Chromium it fails and says how to install it."""
 
@@ -34,25 +34,41 @@ def gamepad_station(page, socket, frame: dict):
     """The page in a continuous drive read from the virtual gamepad, `frame` shown and the car
     taken over; returns sent_for(**pad): the controls and hand-backs the page sends once the pad is
     set to `pad` (what the messages before it brought is sent by then, and left out)."""
+    sent_after = listen(page, socket)
+    page.evaluate(GAMEPAD)
+    welcome(socket, ["gamepad"])
+    drive(page, socket, frame)
+    return lambda **pad: sent_after("(values) => Object.assign(window.pad, values)", pad)
+
+
+def listen(page, socket):
+    """sent_after(script, arg): the controls and hand-backs the page sends once `script` has run
+    with `arg` in the page (what came before it is sent by then, and left out)."""
     received: list[dict] = []
     socket.on_message(lambda text: received.append(json.loads(text)))
-    page.evaluate(GAMEPAD)
 
-    def sent_for(**pad) -> list[dict]:
+    def sent_after(script: str, arg) -> list[dict]:
         page.wait_for_timeout(300)
         count = len(received)
-        page.evaluate("(values) => Object.assign(window.pad, values)", pad)
-        page.wait_for_timeout(400)   # many animation frames have read the pad by then
+        page.evaluate(script, arg)
+        page.wait_for_timeout(400)   # many animation frames have read the device by then
         return [message for message in received[count:] if message["type"] in ("control", "hand_back")]
 
+    return sent_after
+
+
+def welcome(socket, inputs: list[str]) -> None:
     socket.send(json.dumps({"type": "welcome", "participant": 0, "consent": "", "view": "driver",
-                            "driving": "continuous", "inputs": ["gamepad"]}))
+                            "driving": "continuous", "inputs": inputs}))
+
+
+def drive(page, socket, frame: dict) -> None:
+    """The drive runs, `frame` shown, and the car taken over."""
     socket.send(state_message("driving"))
     socket.send(json.dumps({"type": "episode_start", "episode_id": "x", "trust": 4}))
     socket.send(json.dumps(frame))
     socket.send(json.dumps({"type": "mode", "mode": "manual", "t": 10.0}))
     wait_until(page, "document.getElementById('mode').textContent === 'MANUAL'")
-    return sent_for
 
 
 def test_a_gamepad_sends_nothing_while_the_car_is_held_paused_or_its_drive_over(station, tmp_path):
@@ -120,7 +136,8 @@ def test_by_wheel_the_station_holds_the_pedals_as_the_frames_say_not_as_the_warn
         socket.send(json.dumps({"type": "warning", "kind": "hold", "t": 11.5}))
         socket.send(json.dumps({**moving, "t": 11.5, "held": False}))
         page.locator("#incident").filter(has_text="the car stops here").wait_for()
-        assert [(c["steer"], c["throttle"]) for c in sent_for(steer=0.1, throttle=0.5)] == [(0.1, 0.5)]
+        sent = sent_for(steer=0.1, throttle=0.5)
+        assert [(c["steer"], c["throttle"]) for c in sent] == [(0.1, 0.5)]
 
 
 def test_a_gamepad_disconnected_in_control_lets_go_of_what_it_last_sent(station):
@@ -169,3 +186,91 @@ def test_the_arrow_keys_steer_more_gently_the_faster_the_car(station):
     assert max(lateral_acceleration(13.9, steer) for steer in fast) <= 4.4
     assert lateral_acceleration(13.9, fast[34]) > 3.5   # the most it asks, within 0.7 s
     assert all(later >= earlier for earlier, later in zip(fast, fast[1:], strict=False))
+
+
+# The devices the page finds (`window.devices`, the first is read): a wheel, its pedals axes resting
+# at 1 and pressed at -1 (a G29's), its button 4; a gamepad in the standard mapping, its left stick
+# axis 0, its triggers buttons 6 (brake) and 7 (throttle), its A button 0.
+DEVICES = """window.devices = [];
+navigator.getGamepads = () => window.devices.map((device, index) => ({
+  id: device.id, index, connected: true, mapping: device.mapping, timestamp: performance.now(),
+  axes: [...device.axes], buttons: Array.from({ length: 17 }, (_, i) => {
+    const value = device.buttons[i] ?? 0;
+    return { pressed: value > 0.5, touched: value > 0, value };
+  }),
+}));"""
+SET_DEVICES = "(devices) => { window.devices = devices; }"
+
+
+def wheel(steer: float = 0, throttle: float = 0, brake: float = 0, button: bool = False,
+          name: str = "virtual wheel A") -> dict:
+    return {"id": name, "mapping": "", "axes": [steer, 1 - 2 * throttle, 1 - 2 * brake, 0],
+            "buttons": {4: 1} if button else {}}
+
+
+def gamepad(steer: float = 0, throttle: float = 0, brake: float = 0, name: str = "virtual gamepad B") -> dict:
+    return {"id": name, "mapping": "standard", "axes": [steer, 0, 0, 0], "buttons": {6: brake, 7: throttle}}
+
+
+def calibrate_wheel(page, **wheel_values) -> None:
+    """The station's calibration (*Calibrate the wheel*, then *Next* at each step) of the wheel
+    `wheel(**wheel_values)`, held as each step asks."""
+    page.locator("#calibrate").click()
+    for held in ({}, {"steer": -1}, {"steer": 1}, {"throttle": 1}, {"brake": 1}, {"button": True}):
+        page.evaluate(SET_DEVICES, [wheel(**wheel_values, **held)])
+        page.locator("#calibrate-next").click()
+    # (in a drive the box goes once the wheel is read: its text is looked at, not seen)
+    wait_until(page, "document.getElementById('calibration-text').textContent.startsWith('Calibrated')")
+    page.evaluate(SET_DEVICES, [wheel(**wheel_values)])
+
+
+def controls(sent: list[dict]) -> list[tuple]:
+    return [(c["source"], c["steer"], c["throttle"], c["brake"]) for c in sent if c["type"] == "control"]
+
+
+def test_a_calibration_is_the_devices_own_and_another_device_is_read_by_the_standard_mapping(station):
+    """A wheel calibrated on the ready step is read by its calibration; a gamepad connected
+    after it is read in the standard mapping (its stick steers, its trigger accelerates), not
+    through the wheel's axes (where its resting axis 1 would be the accelerator half pressed); the
+    wheel back, its calibration still applies."""
+    frame, _ = scene_on(station.net_path)
+    with station.open() as (page, socket):
+        sent_after = listen(page, socket)
+        page.evaluate(DEVICES)
+        welcome(socket, ["wheel", "gamepad"])
+        socket.send(state_message("ready", trial=0))
+        page.locator("#calibrate").wait_for(state="visible")
+        page.evaluate(SET_DEVICES, [wheel()])
+        calibrate_wheel(page)
+        drive(page, socket, {**frame, "speed": 5.0})
+        full = sent_after(SET_DEVICES, [wheel(steer=1.0, throttle=1.0)])
+        assert controls(full) == [("wheel", 1.0, 1.0, 0.0)]
+        assert controls(sent_after(SET_DEVICES, [gamepad(steer=-1.0, throttle=1.0)])) == [
+            ("gamepad", -1.0, 1.0, 0.0)]
+        assert controls(sent_after(SET_DEVICES, [gamepad()])) == [("gamepad", 0.0, 0.0, 0.0)]
+        assert controls(sent_after(SET_DEVICES, [wheel(brake=1.0)])) == [("wheel", 0.0, 0.0, 1.0)]
+
+
+def test_a_wheel_not_calibrated_is_not_read_and_the_station_offers_the_calibration(station, tmp_path):
+    """A device outside the standard mapping, with no calibration for its id, is not read through
+    the standard layout (its pedals, axes there, would do nothing): the ready step and, in a
+    drive, the notice over the view say it must be calibrated, nothing is sent for it, and
+    *Calibrate the wheel* is there in the drive too; once calibrated it drives."""
+    frame, _ = scene_on(station.net_path)
+    with station.open() as (page, socket):
+        sent_after = listen(page, socket)
+        page.evaluate(DEVICES)
+        welcome(socket, ["wheel", "gamepad"])
+        socket.send(state_message("ready", trial=0))
+        page.evaluate(SET_DEVICES, [wheel()])
+        asked = "not calibrated"
+        page.locator("#calibration-text").filter(has_text=asked).wait_for()
+        page.screenshot(path=str(tmp_path / "uncalibrated-ready.png"))
+        drive(page, socket, {**frame, "speed": 5.0})
+        assert controls(sent_after(SET_DEVICES, [wheel(steer=0.5, throttle=1.0)])) == []
+        page.locator("#incident").filter(has_text=asked).wait_for()
+        page.locator("#calibrate").wait_for(state="visible")
+        page.screenshot(path=str(tmp_path / "uncalibrated-drive.png"))
+        calibrate_wheel(page)
+        wait_until(page, f"!document.getElementById('incident').textContent.includes({asked!r})")
+        assert controls(sent_after(SET_DEVICES, [wheel(throttle=1.0)])) == [("wheel", 0.0, 1.0, 0.0)]
