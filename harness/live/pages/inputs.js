@@ -14,6 +14,13 @@
 // `ask()` says so, and the station offers the calibration.
 
 const STORAGE_KEY = "trustroute.wheel";   // {device id: its calibration}
+// Steering and pedals read from a device count only beyond DEAD_ZONE of their travel from rest
+// (after the calibration), rescaled so that full travel is still full: a stick that drifts a few
+// hundredths, a wheel resting slightly off the centre it was calibrated at or a pedal not quite
+// back at rest would otherwise steer or press all the time. 0.05 is past the drift of a worn
+// stick's rest (a few hundredths) and, on a 900-degree wheel, about 22 degrees either side of the
+// centre; the vehicle model's steering at 50 km/h starts from nothing beyond it, not with a jump.
+export const DEAD_ZONE = 0.05;
 // A held arrow key turns the wheel KEY_STEER_RATE per second up to full lock at up to
 // KEY_FULL_LOCK_SPEED; faster, both its reach and its rate fall with the square of the speed. The
 // vehicle model's lateral acceleration grows with speed squared times the steering
@@ -42,6 +49,9 @@ const clamp = (value, low, high) => Math.min(Math.max(value, low), high);
 function pedal(value, rest, full) {
   return full === rest ? 0 : clamp((value - rest) / (full - rest), 0, 1);
 }
+
+// A reading (-1..1) with the dead zone taken out: 0 within DEAD_ZONE, then rising to 1 at 1.
+const outsideDeadZone = (value) => Math.sign(value) * Math.max(0, Math.abs(value) - DEAD_ZONE) / (1 - DEAD_ZONE);
 
 export function firstGamepad() {
   for (const pad of navigator.getGamepads ? navigator.getGamepads() : []) if (pad && pad.connected) return pad;
@@ -124,7 +134,8 @@ export class Inputs {
     }
     const toggle = pressed && !this.buttonDown;
     this.buttonDown = pressed;
-    return { steer, throttle, brake, toggle, source: padKind(pad) };
+    return { steer: outsideDeadZone(steer), throttle: outsideDeadZone(throttle), brake: outsideDeadZone(brake),
+             toggle, source: padKind(pad) };
   }
 
   fromKeyboard(seconds, speed) {

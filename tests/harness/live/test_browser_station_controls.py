@@ -1,6 +1,7 @@
 """The station's driving controls in real Chromium (a gamepad read through the Gamepad API, a
-wheel's pedals, each device by its own calibration or the standard mapping, the arrow keys), the
-websocket answered by the test with the server's messages as in test_browser_station.py.
+wheel's pedals, each device by its own calibration or the standard mapping, the dead zone, the
+arrow keys), the websocket answered by the test with the server's messages as in
+test_browser_station.py.
 
 Never skips: without Chromium it fails and says how to install it."""
 
@@ -57,6 +58,13 @@ def listen(page, socket):
     return sent_after
 
 
+def reading(page):
+    """read(value): what the page sends for a stick or trigger at `value` (the dead zone taken
+    out, inputs.js DEAD_ZONE; rounded as the page rounds it)."""
+    dead_zone = page.evaluate(DEAD_ZONE)
+    return lambda value: round(outside(value, dead_zone), 3)
+
+
 def welcome(socket, inputs: list[str]) -> None:
     socket.send(json.dumps({"type": "welcome", "participant": 0, "consent": "", "view": "driver",
                             "driving": "continuous", "inputs": inputs}))
@@ -82,6 +90,7 @@ def test_a_gamepad_sends_nothing_while_the_car_is_held_paused_or_its_drive_over(
     moving = {**frame, "speed": 5.0}
     with station.open() as (page, socket):
         sent_for = gamepad_station(page, socket, moving)
+        read = reading(page)
 
         def warn(kind: str, held: bool = False, **shown) -> None:
             socket.send(json.dumps({"type": "warning", "kind": kind, "t": 11.0}))
@@ -90,10 +99,10 @@ def test_a_gamepad_sends_nothing_while_the_car_is_held_paused_or_its_drive_over(
         assert [c["throttle"] for c in sent_for(throttle=1.0)] == [1.0]
         for kind in ("oncoming", "hand_back", "guide_back"):   # guided back: the pedals still drive it
             warn(kind)
-        assert [c["throttle"] for c in sent_for(throttle=0.6)] == [0.6]
+        assert [c["throttle"] for c in sent_for(throttle=0.6)] == [read(0.6)]
         warn("own_lane", held=True)   # back in its lane: the hold brakes it to a stand
         held = sent_for(steer=0.5, throttle=0.9)
-        assert [(c["steer"], c["throttle"], c["brake"]) for c in held] == [(0.5, 0.0, 0.0)]
+        assert [(c["steer"], c["throttle"], c["brake"]) for c in held] == [(read(0.5), 0.0, 0.0)]
         socket.send(json.dumps({**frame, "t": 10.5, "held": True}))   # standing
         assert sent_for(steer=-0.5, throttle=1.0) == []
         assert [m["type"] for m in sent_for(button=True)] == ["hand_back"]
@@ -101,7 +110,7 @@ def test_a_gamepad_sends_nothing_while_the_car_is_held_paused_or_its_drive_over(
         page.evaluate("window.pad.button = false")
         socket.send(json.dumps({**moving, "t": 12.5}))
         socket.send(json.dumps({"type": "mode", "mode": "manual", "t": 13.0}))   # taken over again
-        assert [c["throttle"] for c in sent_for(throttle=0.8)] == [0.8]
+        assert [c["throttle"] for c in sent_for(throttle=0.8)] == [read(0.8)]
         warn("hold", held=True, t=13.5)   # held in its lane
         page.locator("#incident").filter(has_text="the car stops here").wait_for()
         assert [c["throttle"] for c in sent_for(steer=0.2, throttle=0.7)] == [0.0]
@@ -125,11 +134,12 @@ def test_by_wheel_the_station_holds_the_pedals_as_the_frames_say_not_as_the_warn
     moving = {**frame, "speed": 5.0, "mode": "manual"}
     with station.open() as (page, socket):
         sent_for = gamepad_station(page, socket, moving)
+        read = reading(page)
         assert [c["throttle"] for c in sent_for(throttle=1.0)] == [1.0]
         page.screenshot(path=str(tmp_path / "wheel-normal.png"))
         socket.send(json.dumps({**moving, "t": 10.5, "held": True}))
         held = sent_for(steer=0.3, throttle=0.7)
-        assert [(c["steer"], c["throttle"], c["brake"]) for c in held] == [(0.3, 0.0, 0.0)]
+        assert [(c["steer"], c["throttle"], c["brake"]) for c in held] == [(read(0.3), 0.0, 0.0)]
         page.screenshot(path=str(tmp_path / "wheel-held.png"))
         socket.send(json.dumps({**moving, "t": 11.0, "speed": 0.0, "held": True}))   # standing
         assert sent_for(steer=-0.3, throttle=1.0) == []
@@ -137,7 +147,7 @@ def test_by_wheel_the_station_holds_the_pedals_as_the_frames_say_not_as_the_warn
         socket.send(json.dumps({**moving, "t": 11.5, "held": False}))
         page.locator("#incident").filter(has_text="the car stops here").wait_for()
         sent = sent_for(steer=0.1, throttle=0.5)
-        assert [(c["steer"], c["throttle"]) for c in sent] == [(0.1, 0.5)]
+        assert [(c["steer"], c["throttle"]) for c in sent] == [(read(0.1), read(0.5))]
 
 
 def test_a_gamepad_disconnected_in_control_lets_go_of_what_it_last_sent(station):
@@ -148,11 +158,12 @@ def test_a_gamepad_disconnected_in_control_lets_go_of_what_it_last_sent(station)
     frame, _ = scene_on(station.net_path)
     with station.open() as (page, socket):
         sent_for = gamepad_station(page, socket, {**frame, "speed": 5.0})
-        assert [(c["steer"], c["throttle"]) for c in sent_for(steer=0.2, throttle=1.0)] == [(0.2, 1.0)]
+        read = reading(page)
+        assert [(c["steer"], c["throttle"]) for c in sent_for(steer=0.2, throttle=1.0)] == [(read(0.2), 1.0)]
         gone = sent_for(connected=False)
         assert [(c["source"], c["steer"], c["throttle"], c["brake"]) for c in gone] == [("gamepad", 0, 0, 0)]
         page.locator("#incident").filter(has_text="Connect a gamepad").wait_for()
-        assert [c["throttle"] for c in sent_for(connected=True, throttle=0.5)] == [0.5]
+        assert [c["throttle"] for c in sent_for(connected=True, throttle=0.5)] == [read(0.5)]
 
 
 KEY_STEERING = """async ([speed, step, steps]) => {
@@ -200,6 +211,7 @@ navigator.getGamepads = () => window.devices.map((device, index) => ({
   }),
 }));"""
 SET_DEVICES = "(devices) => { window.devices = devices; }"
+DEAD_ZONE = """async () => (await import("/static/inputs.js")).DEAD_ZONE"""
 
 
 def wheel(steer: float = 0, throttle: float = 0, brake: float = 0, button: bool = False,
@@ -222,6 +234,11 @@ def calibrate_wheel(page, **wheel_values) -> None:
     # (in a drive the box goes once the wheel is read: its text is looked at, not seen)
     wait_until(page, "document.getElementById('calibration-text').textContent.startsWith('Calibrated')")
     page.evaluate(SET_DEVICES, [wheel(**wheel_values)])
+
+
+def outside(value: float, dead_zone: float) -> float:
+    """`value` (-1..1) past the dead zone, rescaled to full travel (inputs.js, DEAD_ZONE)."""
+    return math.copysign(max(0.0, abs(value) - dead_zone) / (1 - dead_zone), value)
 
 
 def controls(sent: list[dict]) -> list[tuple]:
@@ -274,3 +291,41 @@ def test_a_wheel_not_calibrated_is_not_read_and_the_station_offers_the_calibrati
         calibrate_wheel(page)
         wait_until(page, f"!document.getElementById('incident').textContent.includes({asked!r})")
         assert controls(sent_after(SET_DEVICES, [wheel(throttle=1.0)])) == [("wheel", 0.0, 1.0, 0.0)]
+
+
+def test_a_dead_zone_keeps_a_drifting_stick_or_an_off_centre_wheel_from_steering(station):
+    """Within DEAD_ZONE of rest (after the calibration) the steering and the pedals read 0, so a
+    stick or pedal that drifts sends nothing; beyond it they are rescaled, full travel still full."""
+    frame, _ = scene_on(station.net_path)
+    with station.open() as (page, socket):
+        sent_for = gamepad_station(page, socket, {**frame, "speed": 5.0})
+        dead_zone = page.evaluate(DEAD_ZONE)
+        assert 0 < dead_zone < 0.2
+        drift = 0.8 * dead_zone
+        assert [(c["steer"], c["throttle"]) for c in sent_for(steer=drift, throttle=1.0)] == [(0.0, 1.0)]
+        assert [(c["steer"], c["throttle"]) for c in sent_for(steer=-drift, throttle=0.0)] == [(0.0, 0.0)]
+        assert sent_for(steer=drift, throttle=drift) == []   # drifting: nothing to send
+        half = [(c["steer"], c["throttle"]) for c in sent_for(steer=-0.5, throttle=0.5)]
+        assert half == [(pytest.approx(outside(-0.5, dead_zone), abs=1e-3),
+                         pytest.approx(outside(0.5, dead_zone), abs=1e-3))]
+        assert [(c["steer"], c["throttle"]) for c in sent_for(steer=1.0, throttle=1.0)] == [(1.0, 1.0)]
+
+
+def test_a_calibrated_wheel_resting_off_centre_sends_no_steering(station):
+    """The dead zone applies after the calibration: a wheel resting a little off the centre it
+    was calibrated at, its pedals a little off their rest, reads 0; full lock is still 1."""
+    frame, _ = scene_on(station.net_path)
+    with station.open() as (page, socket):
+        sent_after = listen(page, socket)
+        page.evaluate(DEVICES)
+        welcome(socket, ["wheel"])
+        socket.send(state_message("ready", trial=0))
+        page.evaluate(SET_DEVICES, [wheel()])
+        calibrate_wheel(page)
+        drive(page, socket, {**frame, "speed": 5.0})
+        off = 0.8 * page.evaluate(DEAD_ZONE)
+        full = sent_after(SET_DEVICES, [wheel(steer=1.0, throttle=1.0)])
+        assert controls(full) == [("wheel", 1.0, 1.0, 0.0)]
+        assert controls(sent_after(SET_DEVICES, [wheel(steer=off, throttle=off, brake=off)])) == [
+            ("wheel", 0.0, 0.0, 0.0)]
+        assert controls(sent_after(SET_DEVICES, [wheel(steer=-off, brake=off)])) == []
