@@ -56,12 +56,13 @@ def withdraw(study_dir: str, participant: int, reason: str, by: str | None, read
         withdraw_participant,
         withdrawal_line,
     )
-    from trustroute.harness.study.runner import study_lock
+    from trustroute.harness.study.runner import held_study
 
     path = Path(study_dir)
     if not path.is_dir():
         raise InputError(study_dir, "", "no such study directory", "pass the directory of a live study")
-    with study_lock(path):
+    with held_study(path, "withdraw from the live console while its server runs, or wait for that run "
+                          "to finish"):
         entry = (readmit_participant(path, participant, by) if readmit
                  else withdraw_participant(path, participant, by, reason))
     audit = path / LIVE_DIR / AUDIT

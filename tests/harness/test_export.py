@@ -8,8 +8,6 @@ import getpass
 import json
 import re
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +24,7 @@ from tests.export_checks import (
     assert_task_inputs,
     package_key,
 )
+from tests.lock_holder import another_process_holds
 from trustroute.harness.study.export import pseudonyms, read_export_keys
 
 
@@ -106,31 +105,16 @@ def test_each_package_keeps_its_key_and_a_key_is_never_dropped(model_study, tmp_
     assert not list(osf.rglob("export-key*"))   # the keys stay in the study
 
 
-HOLD_THE_STUDY = """
-import sys
-from pathlib import Path
-from trustroute.harness.study.runner import study_lock
-with study_lock(Path(sys.argv[1])):   # the lock `trustroute study` and `trustroute live` hold
-    print("held", flush=True)
-    sys.stdin.read()
-"""
-
-
 def test_an_export_is_refused_while_another_process_holds_the_study(model_study, tmp_path, capsys):
     """A run writing the study (a live server, a study resumed) holds its lock: an export then is
     one line naming that process, with no package and no key written; once it has let go, the
     export goes ahead. A folder that is no study is refused before any lock file is made in it."""
     study = shutil.copytree(model_study, tmp_path / "study")
-    holder = subprocess.Popen([sys.executable, "-c", HOLD_THE_STUDY, str(study)],
-                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-    try:
-        assert holder.stdout is not None and holder.stdout.readline() == "held\n"
+    with another_process_holds(study) as pid:
         code, out, err = run_cli(capsys, "export", str(study), "--out", str(tmp_path / "package"))
-        assert_one_line_error(code, err, str(study), f"in use by pid {holder.pid}", "then export again")
+        assert_one_line_error(code, err, str(study), f"in use by pid {pid}", "then export again")
         assert out == "" and not (tmp_path / "package").exists()
         assert not (study / "export-key.json").exists()
-    finally:
-        holder.communicate("", timeout=60)
     code, _, err = run_cli(capsys, "export", str(study), "--out", str(tmp_path / "package"))
     assert code == 0, err
     logs = tmp_path / "logs"

@@ -13,6 +13,7 @@ import pytest
 from click.testing import CliRunner
 
 from tests.cli import assert_one_line_error, run_cli
+from tests.lock_holder import another_process_holds
 from trustroute.core.dataset import read_attempts, read_episodes, read_kinematics, read_roads
 from trustroute.core.errors import InputError
 from trustroute.harness.cli import cli
@@ -468,3 +469,13 @@ def test_a_withdrawal_closes_the_station_of_a_claimed_link(tmp_path):
             assert client.get("/api/me").status_code == 403 and study.credentials.participants == {}
     finally:
         study.close()
+
+
+def test_a_withdrawal_while_a_run_holds_the_study_says_to_use_the_console(tmp_path, capsys):
+    # a live server holds the study: its console withdraws; --out means nothing to `withdraw`
+    study = _unconsolidated(tmp_path, f"{_attempt(0)}\n{_attempt(1)}\n")
+    with another_process_holds(study) as pid:
+        code, out, err = run_cli(capsys, "withdraw", str(study), "p00000")
+        assert_one_line_error(code, err, str(study), f"in use by pid {pid}", "live console")
+        assert "--out" not in err and out == ""
+    assert not (study / "live" / "withdrawals.jsonl").exists()
