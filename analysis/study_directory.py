@@ -25,9 +25,8 @@ from trustroute.core.dataset import (
     read_roads,
 )
 from trustroute.core.errors import InputError
-from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.harness.study.context import load_study_inputs
-from trustroute.harness.study.inputs import MANIFEST_FIX, relocated_config, verify_inputs
+from trustroute.harness.study.inputs import MANIFEST_FIX, relocated_config, spec_path, verify_inputs
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
@@ -100,11 +99,3 @@ def _recorded_input(path: str | None, what: str, shown: str) -> str | None:
                          "its inputs (it was made before studies stored them)",
                          f"restore {path}, or analyse the study where it was made")
     return path
-
-
-def spec_path(path: str) -> Path:
-    """A manifest's spec path; a packaged spec when the recorded path is gone (a study directory
-    shipped with the package, or moved to another machine)."""
-    recorded = Path(path)
-    packaged = PACKAGED_SPECS / recorded.name
-    return recorded if recorded.exists() or not packaged.exists() else packaged

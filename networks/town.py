@@ -397,12 +397,18 @@ def extras_fields(extras: RoadExtras) -> dict:
             "turns": dict(extras.turns or {})}
 
 
+def town_file(path: str | Path | None) -> Path:
+    """The file a town argument or a study's recorded town names: `TOWNS.resolve`, the packaged
+    default town for None."""
+    return TOWNS.resolve(path) if path is not None else DEFAULT_TOWN_PATH
+
+
 def load_town(path: str | Path | None = None, given: str = "--town") -> Town:
     """Load and validate a town file or a packaged town by name (`TOWNS`: "town01_carla",
     "pentagon", "city"; the packaged default when `path` is None), read through the guarded reader
     (trustroute.core.validation). `given`: how the command line takes it, named in the hint when it
     cannot be read (PackagedKind.fix)."""
-    file_path = TOWNS.resolve(path) if path is not None else DEFAULT_TOWN_PATH
+    file_path = town_file(path)
     shown = "default town" if path is None else str(path if file_path == Path(path) else file_path)
     if file_path.name.lower().endswith(NET_SUFFIXES + OSM_SUFFIXES) and file_path.is_file():
         raise InputError(shown, "", "a SUMO net or an OpenStreetMap file, not a town file (JSON)",

@@ -438,11 +438,17 @@ def driver_model_from_dict(data: object, path: str = "<driver model>") -> Driver
     )
 
 
+def driver_model_file(path: str | Path | None) -> Path:
+    """The file a driver model argument or a study's recorded model names: `DRIVER_MODELS.resolve`,
+    the packaged default model for None."""
+    return DRIVER_MODELS.resolve(path) if path is not None else DEFAULT_DRIVER_MODEL_PATH
+
+
 def load_driver_model(path: str | Path | None = None) -> DriverModel:
     """Load and validate a driver model file or a packaged model by name (`DRIVER_MODELS`:
     "driver_model", "driver_model_performance"; the packaged default when `path` is None), read
     through the guarded reader (trustroute.core.validation)."""
-    file_path = DRIVER_MODELS.resolve(path) if path is not None else DEFAULT_DRIVER_MODEL_PATH
+    file_path = driver_model_file(path)
     shown = "default driver model" if path is None else str(path if file_path == Path(path) else file_path)
     text = read_text(file_path, shown, "the driver model", DRIVER_MODELS.fix("--driver"))
     return driver_model_from_text(text, shown)

@@ -13,9 +13,9 @@ from trustroute.analysis import paper_figures
 from trustroute.analysis.formatting import MISSING, bounds_text
 from trustroute.analysis.statistics import rate_interval
 from trustroute.analysis.study.design import study_participants
-from trustroute.analysis.study_directory import spec_path
 from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.core.wording import counted
+from trustroute.harness.study.inputs import spec_path
 from trustroute.networks.town import load_town
 from trustroute.policies.logic.spec import load_spec
 

@@ -32,6 +32,7 @@ from pathlib import Path
 from trustroute.core.dataset import MANIFEST_FILE
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_bytes
+from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.harness.study.config import NAMED_CONDITIONS
 from trustroute.harness.study.context import (
     StudyContext,
@@ -40,8 +41,8 @@ from trustroute.harness.study.context import (
     belief_rule,
     robust_problem,
 )
-from trustroute.networks.town import DEFAULT_TOWN_PATH, load_town
-from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
+from trustroute.networks.town import load_town, town_file
+from trustroute.participants.driver_model import driver_model_file
 from trustroute.participants.driver_population import load_driver_population
 from trustroute.participants.questionnaires import PACKAGED
 from trustroute.policies.resolve import aware_cache_path, population_cache_path
@@ -59,10 +60,16 @@ def _sha256(path: Path) -> str:
 Record = dict[str, dict[str, str]]
 
 
+def content_folder(data: bytes) -> str:
+    """The folder a study stores an input of content `data` in, relative to the study directory:
+    inputs/<first 16 hex of its SHA-256> (the export lays out a package's inputs by it too)."""
+    return f"{INPUTS_DIR}/{hashlib.sha256(data).hexdigest()[:16]}"
+
+
 def _write(study_dir: Path, record: Record, data: bytes, name: str, source: str,
            folder: Path | None = None) -> str:
-    """Store `data` as `name` in `folder` (default: inputs/<its content hash>); its relative path."""
-    folder = folder or study_dir / INPUTS_DIR / hashlib.sha256(data).hexdigest()[:16]
+    """Store `data` as `name` in `folder` (default: its `content_folder`); its relative path."""
+    folder = folder or study_dir / content_folder(data)
     target = folder / name
     if not (target.is_file() and target.read_bytes() == data):
         folder.mkdir(parents=True, exist_ok=True)
@@ -136,10 +143,9 @@ def store_inputs(study_dir: Path, context: StudyContext) -> tuple[dict, dict]:
     recorded["specs"] = [_store_file(study_dir, record, p) for p in config.specs]
     recorded["conditions"] = [c if c in NAMED_CONDITIONS else _store_file(study_dir, record, c)
                               for c in config.conditions]
-    recorded["town"] = _store_town(study_dir, record, config.town or DEFAULT_TOWN_PATH)
+    recorded["town"] = _store_town(study_dir, record, town_file(config.town))
     recorded["routes"] = [_store_file(study_dir, record, p) for p in config.routes]
-    recorded["driver_model"] = _store_file(study_dir, record,
-                                           config.driver_model or DEFAULT_DRIVER_MODEL_PATH)
+    recorded["driver_model"] = _store_file(study_dir, record, driver_model_file(config.driver_model))
     for key in ("robust_population", "driver_population"):
         value = getattr(config, key)
         recorded[key] = None if value is None else _store_population(study_dir, record, value)
@@ -155,6 +161,24 @@ def store_inputs(study_dir: Path, context: StudyContext) -> tuple[dict, dict]:
     if Path(config.source_path).is_file():
         recorded["source_path"] = _store_file(study_dir, record, config.source_path)
     return recorded, {"dir": INPUTS_DIR, "files": record, "config_sha256": config_sha256(recorded)}
+
+
+def spec_path(path: str) -> Path:
+    """A manifest's spec path; a packaged spec when the recorded path is gone (a study directory
+    shipped with the package, or moved to another machine)."""
+    recorded = Path(path)
+    packaged = PACKAGED_SPECS / recorded.name
+    return recorded if recorded.exists() or not packaged.exists() else packaged
+
+
+def task_files(config: dict) -> dict[str, list[Path]]:
+    """The files that define the task of a study (its manifest's config, as `relocated_config`
+    gives it), found as the analysis of a study directory loads them (analysis/study_directory.py,
+    `study_inputs`): the specs by `spec_path`, the town and the driver model the config names, else
+    the packaged default ones (`town_file`, `driver_model_file`). Config key -> its files."""
+    return {"specs": [spec_path(p) for p in config.get("specs") or []],
+            "town": [town_file(config.get("town"))],
+            "driver_model": [driver_model_file(config.get("driver_model"))]}
 
 
 def config_sha256(config: dict) -> str:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from trustroute.core.errors import InputError
-from trustroute.core.packaged import PACKAGED_SPECS, SPEC_TOWNS, SPECS
+from trustroute.core.packaged import SPEC_TOWNS, SPECS
 from trustroute.core.wording import shown_value
 from trustroute.networks.town import Town, load_town
 from trustroute.participants.driver_model import DriverModel, load_driver_model
@@ -41,11 +41,7 @@ def packaged_spec_town(spec: Spec | PathLike) -> str | None:
     if isinstance(spec, Spec):
         return None
     path = SPECS.resolve(spec)
-    try:
-        packaged = path.resolve().parent == PACKAGED_SPECS.resolve()
-    except OSError:
-        return None
-    return SPEC_TOWNS.get(path.stem) if packaged else None
+    return SPEC_TOWNS.get(path.stem) if SPECS.ships(path) else None
 
 
 def town_of(town: Town | PathLike | None, spec: Spec | PathLike | None = None, given: str = "--town") -> Town:

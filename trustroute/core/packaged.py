@@ -66,6 +66,15 @@ class PackagedKind:
             return path
         return self.path(value) or path
 
+    def ships(self, path: str | Path) -> bool:
+        """Whether `path` is one of the kind's shipped files: a file in its folder, however the path
+        reaches it (the repository's specs/ links to the packaged folder)."""
+        try:
+            path = Path(path).resolve()
+        except OSError:
+            return False
+        return path.parent == self.folder.resolve() and path.is_file()
+
     def fix(self, given: str = "") -> str:
         """The hint for a missing input: a file, or one of the packaged names (which exist).
         `given` is how the command line takes it: an option ("--town": "with --town") or a
