@@ -71,12 +71,12 @@ TASK_INPUTS = ("specs", "town", "driver_model", "source_path")   # what every st
 ABSOLUTE = re.compile(rb"(?<![\w.:/])/[\w.-]+/")
 
 
-def assert_task_inputs(package: Path) -> None:
-    """The package holds every input its study_config.json names (the specs, the town, the driver
-    model, the config file and any policy file, population or route file), where the config names
-    it, each listed in SHA256SUMS with its hash and in the README."""
+def assert_task_inputs(package: Path, keys: tuple[str, ...] = TASK_INPUTS) -> None:
+    """The package holds every input its study_config.json names (`keys`: by default the specs, the
+    town, the driver model and the config file; and any policy file, population or route file),
+    where the config names it, each listed in SHA256SUMS with its hash and in the README."""
     config = json.loads((package / "study_config.json").read_text())
-    named = [config[key] for key in TASK_INPUTS]
+    named = [config[key] for key in keys]
     for key in ("conditions", "routes", "robust_population", "driver_population"):
         value = config.get(key) or []
         named += [v for v in (value if isinstance(value, list) else [value]) if v.startswith("inputs/")]

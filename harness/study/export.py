@@ -228,8 +228,8 @@ def export_study(study_dir: Path, out: Path, rng: np.random.Generator, ended: di
     atomic_write_text(out / "codebook.md", codebook_markdown(book), "codebook")
     config = {setting: value for setting, value in manifest["config"].items()
               if not (people and setting in CONFIG_WITHOUT_PEOPLE_SEEDS)}
-    atomic_write_text(out / "study_config.json", config_text(config, manifest), "study config")
     packaged = export_inputs(study_dir, manifest, out, key, registry)
+    atomic_write_text(out / "study_config.json", config_text(config, packaged), "study config")
     versions = {"python": platform.python_version(), "git_revision": manifest.get("git_revision"),
                 "packages": manifest.get("packages", {}), "engine": manifest.get("engine")}
     atomic_write_text(out / "versions.json", json.dumps(versions, indent=1), "software versions")

@@ -4,22 +4,30 @@ populations, the background routes, the policy files of the conditions and the p
 study took from the policy cache, the questionnaire files and the study's config file: the
 files the manifest records of the study's own `inputs/` (harness/study/inputs.py), copied under
 the same relative paths, so that the package's `study_config.json` names them where they lie.
+A study whose directory holds no copy of its inputs (one imported by `trustroute import
+carla-logs`, or made before studies stored them) gets the files of its task as the installed
+trustroute package ships them: its specs, town and driver model, found as its analysis finds them
+(`task_files`), laid out as a study stores them (`content_folder`), with the package's
+`study_config.json` naming them there.
 
-Nothing is read from outside the study directory: a recorded path that leads out of `inputs/`,
-or through a symbolic link out of the study directory, is not followed, and the file is left
-out. Nothing identifying enters the package: every text file is read before it is copied. An
-absolute path in it is rewritten to the package's copy of the file or folder it names (the
-manifest records where each copy came from), or, naming nothing the package holds, replaced by
-`PATH_LEFT_OUT`; an episode id's participant number becomes its pseudonym. A file that names the
-account that runs the export or its machine, a live participant's label or token digest, a
-participant the package has no code for, or holds a token-shaped string is left out. The README
-lists each file with its role, each file rewritten and each left out with the reason.
+Nothing is read from outside the study directory and the installed package: a recorded path that
+leads out of `inputs/`, or through a symbolic link out of the study directory, is not followed,
+and a task file the package does not ship is not read; either is left out. Nothing identifying
+enters the package: every text file is read before it is copied. An absolute path in it is
+rewritten to the package's copy of the file or folder it names (the manifest, or the task file's
+place in the installed package, says where each copy came from), or, naming nothing the package
+holds, replaced by `PATH_LEFT_OUT`; an episode id's participant number becomes its pseudonym. A
+file that names the account that runs the export or its machine, a live participant's label or
+token digest, a participant the package has no code for, or holds a token-shaped string is left
+out. The README lists each file with its role, each file rewritten and each left out with the
+reason.
 """
 
 from __future__ import annotations
 
 import getpass
 import gzip
+import hashlib
 import json
 import math
 import os
@@ -29,9 +37,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from trustroute.core.output_files import atomic_write_bytes
+from trustroute.core.packaged import SPECS, PackagedKind
 from trustroute.core.wording import counted
 from trustroute.harness.live.auth import TOKEN_BYTES
-from trustroute.harness.study.inputs import INPUTS_DIR, POLICIES_DIR
+from trustroute.harness.study.inputs import INPUTS_DIR, POLICIES_DIR, Record, content_folder, task_files
+from trustroute.networks.town import TOWNS
+from trustroute.participants.driver_model import DRIVER_MODELS
 
 # what an absolute path naming nothing the package holds becomes in a copied file
 PATH_LEFT_OUT = "<a path on the lab's disk, left out>"
@@ -52,15 +63,25 @@ ROLES = {"specs": "spec (formula, start road, atoms)", "town": "town", "driver_m
          "condition", "driver_population": "driver population of the synthetic drivers",
          "conditions": "policy file of a condition", "questionnaires": "questionnaire",
          "source_path": "the study's config file, as written"}
+# the kind of packaged file each config key of `task_files` names
+TASK_KINDS: dict[str, PackagedKind] = {"specs": SPECS, "town": TOWNS, "driver_model": DRIVER_MODELS}
+NOT_SHIPPED = ("it is not a file the installed trustroute package ships, and the export reads nothing "
+               "else outside the study directory")
 
 
 @dataclass
 class PackagedInputs:
     """The package's inputs: each copied file's role, the files rewritten (path -> what was
-    rewritten) and those left out (path -> why)."""
+    rewritten) and those left out (path, or config place of a task file not shipped, -> why);
+    `record`: each input's relative path -> {"sha256", "source"} (the manifest's, or for a study
+    that stored none, `shipped_task`'s), `named`: the config values naming the copies of such a
+    study's task files, `shipped`: whether the inputs are the installed package's files."""
     roles: dict[str, str] = field(default_factory=dict)
     rewritten: dict[str, str] = field(default_factory=dict)
     left_out: dict[str, str] = field(default_factory=dict)
+    record: Record = field(default_factory=dict)
+    named: dict[str, object] = field(default_factory=dict)
+    shipped: bool = False
 
 
 def input_roles(config: dict, recorded: list[str]) -> dict[str, str]:
@@ -160,6 +181,28 @@ def within(study_dir: Path, relative: str) -> Path | None:
     return path if path.resolve().is_relative_to(root) and path.is_file() else None
 
 
+def shipped_task(config: dict, packaged: PackagedInputs) -> dict[str, Path]:
+    """Fill `packaged` with the task files of a study that stored no copy of its inputs (`config`:
+    its manifest's), as the installed package ships them, each under the package's inputs/ as a
+    study stores it; relative path -> the file to copy. A file the package does not ship is left
+    out, under its config place, and its config value is kept."""
+    packaged.shipped, sources = True, {}
+    for key, paths in task_files(config).items():
+        values, many = [], isinstance(config.get(key), list)
+        for index, path in enumerate(paths):
+            if not TASK_KINDS[key].ships(path):
+                packaged.left_out[f"config.{key}" + f"[{index}]" * many] = NOT_SHIPPED
+                values.append(config[key][index] if many else config.get(key))
+                continue
+            data = path.read_bytes()
+            relative = f"{content_folder(data)}/{path.name}"
+            packaged.record[relative] = {"sha256": hashlib.sha256(data).hexdigest(), "source": str(path)}
+            sources[relative] = path
+            values.append(relative)
+        packaged.named[key] = values if many else values[0]
+    return sources
+
+
 def file_text(relative: str, data: bytes) -> str | None:
     """A copied file's text (a gzipped one's, decompressed), None for a binary file."""
     try:
@@ -172,12 +215,16 @@ def export_inputs(study_dir: Path, manifest: dict, out: Path, key: dict[int, int
                   registry: list[tuple[str, str]]) -> PackagedInputs:
     """Copy the study's recorded inputs into the package `out` (see the module's doc); `key`: the
     pseudonyms, `registry`: the words of a live study's registry no file may hold (`identifying_names`)."""
-    record = (manifest.get("inputs") or {}).get("files", {})
-    packaged = PackagedInputs()
-    roles = input_roles(manifest.get("config") or {}, list(record))
-    mapped, names = path_map(record), identifying_names(registry)
-    for relative in sorted(record):
-        path = within(study_dir, relative)
+    config, packaged = manifest.get("config") or {}, PackagedInputs()
+    if manifest.get("inputs") is None:
+        sources: dict[str, Path | None] = {**shipped_task(config, packaged)}
+    else:
+        packaged.record = manifest["inputs"].get("files", {})
+        sources = {relative: within(study_dir, relative) for relative in packaged.record}
+    roles = input_roles({**config, **packaged.named}, list(packaged.record))
+    mapped, names = path_map(packaged.record), identifying_names(registry)
+    for relative in sorted(packaged.record):
+        path = sources[relative]
         if path is None:
             packaged.left_out[relative] = ("it is not a file of the study's inputs/ (a path or a symbolic "
                                            "link leading out of the study directory is not followed)")
@@ -201,23 +248,27 @@ def export_inputs(study_dir: Path, manifest: dict, out: Path, key: dict[int, int
     return packaged
 
 
-def config_text(config: dict, manifest: dict) -> str:
-    """The package's `study_config.json`: the config, any absolute path in it (a study made before
-    its inputs were stored) made relative as in the copied files."""
-    mapped = path_map((manifest.get("inputs") or {}).get("files", {}))
-    return rewritten_paths(json.dumps(config, indent=1, default=str), mapped)[0]
+def config_text(config: dict, packaged: PackagedInputs) -> str:
+    """The package's `study_config.json`: the config, naming the copies of the task files of a study
+    that stored none, any absolute path in it (a study made before its inputs were stored) made
+    relative as in the copied files."""
+    named = {**config, **packaged.named}
+    return rewritten_paths(json.dumps(named, indent=1, default=str), path_map(packaged.record))[0]
 
 
 def inputs_readme(packaged: PackagedInputs) -> list[str]:
     """The README's lines on the package's inputs."""
-    if not packaged.roles and not packaged.left_out:
-        return ["- `inputs/`: none; the study directory holds no copy of its inputs (a study made before "
-                "studies stored them, or imported by `trustroute import carla-logs`, which stores none), so "
-                "`study_config.json` names them as the study did, an absolute path replaced by "
-                f"`{PATH_LEFT_OUT}`."]
-    lines = ["- `inputs/`: the study's own copies of the files that define its task, under the paths "
-             "`study_config.json` names them by (`inputs/<first 16 hex of the SHA-256 the study recorded>/"
-             "<file name>`; policies from the policy cache in `inputs/policies/`):"]
+    if packaged.shipped:
+        lines = ["- `inputs/`: the files that define the study's task, of which its directory holds no "
+                 "copy (a study imported by `trustroute import carla-logs`, or made before studies stored "
+                 "their inputs): the specs, town and driver model its config names (the packaged default "
+                 "town and driver model where it names none), as the installed trustroute package ships "
+                 "them and `trustroute analyze` reads them, under the paths `study_config.json` names them "
+                 "by (`inputs/<first 16 hex of the file's SHA-256>/<file name>`):"]
+    else:
+        lines = ["- `inputs/`: the study's own copies of the files that define its task, under the paths "
+                 "`study_config.json` names them by (`inputs/<first 16 hex of the SHA-256 the study "
+                 "recorded>/<file name>`; policies from the policy cache in `inputs/policies/`):"]
     lines += [f"  - `{path}`: {role}" + (f"; rewritten for the package ({packaged.rewritten[path]}), so its "
                                            "SHA-256 differs from the one in its folder's name"
                                            if path in packaged.rewritten else "") + "."

@@ -257,17 +257,86 @@ driver_model = "driver.json"
     assert_nothing_identifying(package, [str(tmp_path), getpass.getuser()])
 
 
+def test_an_imported_study_packages_the_task_its_analysis_used(tmp_path, capsys):
+    """The real CARLA study stores no inputs: its package holds the specs, the town and the driver
+    model its analysis loads (the packaged phi1 and phi2, the default town and driver model), byte for
+    byte as the installed package ships them, where its study_config.json names them inside the
+    package, with their hashes and roles, and no path of the lab's disk or of the installation."""
+    from trustroute.analysis.study_directory import load_study, study_inputs
+    from trustroute.core.packaged import PACKAGED_SPECS
+    from trustroute.networks.town import DEFAULT_TOWN_PATH, load_town
+    from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH, load_driver_model
+    from trustroute.policies.logic.spec import load_spec
+
+    study = shutil.copytree("analysis/data/real_study/study", tmp_path / "study")
+    package = tmp_path / "package"
+    code, out, err = run_cli(capsys, "export", str(study), "--out", str(package), "--json")
+    assert code == 0, err
+    assert_task_inputs(package, ("specs", "town", "driver_model"))
+    config = json.loads((package / "study_config.json").read_text())
+    named = {"town": config["town"], "driver_model": config["driver_model"],
+             **{Path(p).stem: p for p in config["specs"]}}
+    assert all((package / p).resolve().is_relative_to(package.resolve()) for p in named.values()), named
+    shipped = {"town": DEFAULT_TOWN_PATH, "driver_model": DEFAULT_DRIVER_MODEL_PATH,
+               "phi1": PACKAGED_SPECS / "phi1.toml", "phi2": PACKAGED_SPECS / "phi2.toml"}
+    assert {k: (package / p).read_bytes() for k, p in named.items()} == {
+        k: p.read_bytes() for k, p in shipped.items()}
+    index = json.loads(out)
+    assert sorted(index["inputs"]) == sorted(named.values()) and index["inputs_left_out"] == {}
+    # the very task the analysis reads from the study directory
+    town, driver, specs = study_inputs(load_study(study)[0], study)
+    copied = load_town(package / named["town"])
+    assert (copied.content_hash, load_driver_model(package / named["driver_model"]).content_hash) == (
+        town.content_hash, driver.content_hash)
+    assert {name: load_spec(package / named[name], copied).content_hash for name in specs} == {
+        name: spec.content_hash for name, spec in specs.items()}
+    readme = (package / "README.md").read_text()
+    spec = "spec (formula, start road, atoms)"
+    for what, role in (("town", "town"), ("driver_model", "driver model"), ("phi1", spec), ("phi2", spec)):
+        assert f"  - `{named[what]}`: {role}.\n" in readme, what
+    installed = [str(Path(trustroute.__file__).parent), *(str(p.parent) for p in shipped.values())]
+    assert_nothing_identifying(package, [str(tmp_path), str(Path.cwd()), *installed])
+
+
 def test_an_imported_study_names_no_path_of_the_lab_in_its_package(tmp_path, capsys):
-    """The import names its specs by their absolute paths where it ran (the packaged specs) and stores
-    no inputs: the package's config names none of them, and the README says it holds no inputs."""
+    """The import names its specs by their absolute paths where it ran (the packaged specs), and a
+    path gone since is read as the packaged spec of its name, as the analysis reads it: the package
+    holds both, and neither its config nor any file names a path of the lab's disk."""
     from trustroute.core.packaged import PACKAGED_SPECS
 
     study = shutil.copytree("analysis/data/real_study/study", tmp_path / "study")
     manifest = json.loads((study / "manifest.json").read_text())
-    manifest["config"]["specs"] = [str(PACKAGED_SPECS / Path(p).name) for p in manifest["config"]["specs"]]
+    manifest["config"]["specs"] = [str(PACKAGED_SPECS / "phi1.toml"), str(tmp_path / "gone" / "phi2.toml")]
     (study / "manifest.json").write_text(json.dumps(manifest))
     code, _, err = run_cli(capsys, "export", str(study), "--out", str(tmp_path / "package"))
     assert code == 0, err
-    assert "- `inputs/`: none; the study directory holds no copy of its inputs" in (
-        tmp_path / "package" / "README.md").read_text()
+    config = json.loads((tmp_path / "package" / "study_config.json").read_text())
+    assert [(tmp_path / "package" / p).read_bytes() for p in config["specs"]] == [
+        (PACKAGED_SPECS / name).read_bytes() for name in ("phi1.toml", "phi2.toml")]
+    assert_task_inputs(tmp_path / "package", ("specs", "town", "driver_model"))
     assert_nothing_identifying(tmp_path / "package", [str(tmp_path), str(PACKAGED_SPECS)])
+
+
+def test_a_task_file_the_package_does_not_ship_is_not_read(tmp_path, capsys):
+    """A study that stored no inputs and names a spec of the lab's disk (which its analysis reads):
+    the export reads nothing outside the study directory and the installed package, so that spec is
+    left out, the README says so under its config place, and study_config.json names no path."""
+    from trustroute.core.packaged import PACKAGED_SPECS
+    from trustroute.harness.study.export_inputs import PATH_LEFT_OUT
+
+    lab = tmp_path / "lab"
+    lab.mkdir()
+    (lab / "phi1.toml").write_text((PACKAGED_SPECS / "phi1.toml").read_text() + "# the lab's own copy\n")
+    study = shutil.copytree("analysis/data/real_study/study", tmp_path / "study")
+    manifest = json.loads((study / "manifest.json").read_text())
+    manifest["config"]["specs"][0] = str(lab / "phi1.toml")
+    (study / "manifest.json").write_text(json.dumps(manifest))
+    package = tmp_path / "package"
+    code, _, err = run_cli(capsys, "export", str(study), "--out", str(package))
+    assert code == 0, err
+    config = json.loads((package / "study_config.json").read_text())
+    assert config["specs"][0] == PATH_LEFT_OUT and (package / config["specs"][1]).is_file()
+    assert re.search(r"`config.specs\[0\]`: left out, since it is not a file the installed trustroute "
+                     r"package ships", (package / "README.md").read_text())
+    assert not [p for p in package.rglob("*") if p.is_file() and b"the lab's own copy" in p.read_bytes()]
+    assert_nothing_identifying(package, [str(tmp_path)])
