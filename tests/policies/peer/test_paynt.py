@@ -137,7 +137,8 @@ def _main(args: list[str], capsys) -> tuple[int, str]:
 def test_inputs_paynt_cannot_take_exit_2_with_one_line(capsys):
     code, err = _main(["peer", "paynt", "specs/phi1.toml", "--horizon", "4", "--time-limit", "1"], capsys)
     assert code == 2 and "belief atoms (hightrust)" in err and len(err.strip().splitlines()) == 1
-    code, err = _main(["peer", "paynt", "specs/phi1_trust.toml", "--horizon", "4", "--max-states", "10"],
+    # H = 6: the first horizon whose product has a reachable goal (below it the answer is 0, PAYNT unrun)
+    code, err = _main(["peer", "paynt", "specs/phi1_trust.toml", "--horizon", "6", "--max-states", "10"],
                       capsys)
     assert code == 2 and "more than PAYNT is run on here (10)" in err
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
