@@ -45,7 +45,7 @@ from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP, build_pomdp
 from trustroute.policies.routing.protocol import Certificate, RoutingPolicy
 from trustroute.policies.routing.trust_state_table import JointTablePolicy
-from trustroute.policies.synthesis.budget import TimeBudget
+from trustroute.policies.synthesis.budget import RunSchedule, TimeBudget
 from trustroute.policies.synthesis.population import (
     BAYES_SHARE,
     EVALUATION_SHARE,
@@ -53,7 +53,6 @@ from trustroute.policies.synthesis.population import (
     OBJECTIVES,
     TYPE_BOUND_SHARE,
     PopulationSynthesis,
-    RunSchedule,
     TypeValue,
     candidate_name,
     candidate_priors,
@@ -196,7 +195,7 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
     `synthesize`: the one synthesis entry (policies/synthesize_spec.py `synthesize_spec`), for the
     per-type bounds of the robust objective; settings.grid_points: its candidate type priors (None:
     MAX_GRID_CANDIDATES). settings.time_limit bounds the whole call, shared among its synthesis
-    runs (policies/synthesis/population.py RunSchedule); on_phase hears a line per finished run."""
+    runs (policies/synthesis/budget.py RunSchedule); on_phase hears a line per finished run."""
     if objective not in OBJECTIVES:
         raise ValueError(f"unknown objective {objective!r}; use 'bayes' or 'robust'")
     population = problem.population

@@ -28,11 +28,10 @@ from trustroute.policies.routing.decision_tables import fallback_only
 from trustroute.policies.synthesis import population as population_synthesis
 from trustroute.policies.synthesis.belief_cells import observation_symbols, reachable_states, suffix_cells
 from trustroute.policies.synthesis.belief_synthesis import cluster_order
-from trustroute.policies.synthesis.budget import TimeBudget
+from trustroute.policies.synthesis.budget import RunSchedule, TimeBudget
 from trustroute.policies.synthesis.population import (
     BAYES_SHARE,
     MAX_GRID_CANDIDATES,
-    RunSchedule,
     run_count,
     synthesize_population,
 )

@@ -100,7 +100,7 @@ def test_a_work_limit_that_is_not_reached_changes_nothing(converged):
 @pytest.mark.slow
 def test_the_runs_of_a_population_synthesis_share_the_work_limit(monkeypatch):
     """The Bayes run, the candidate priors and the per-type evaluations between them are scheduled
-    on the work done (policies/synthesis/population.py's RunSchedule)."""
+    on the work done (policies/synthesis/budget.py's RunSchedule)."""
     settings = dict(horizon=6, population=POPULATION, objective="robust", grid_points=1, work_limit=30_000,
                     time_limit=SLOW)
     first = trustroute.synthesize("phi1_strict", **settings)
