@@ -16,6 +16,12 @@ OTHER_TOWN_FIX = "pass the town the spec is written for (--town; in a study conf
 SELECTOR_EXAMPLE = 'write v1 = {junction = "J12"} or v1 = {street = "Main Street"} (or a list of names)'
 
 
+def other_town_fix(fix: str) -> str:
+    """The fix for a name of a spec's (a road, junction or street) the town lacks: the town the
+    spec is written for first, then `fix`, a name of this town."""
+    return f"{OTHER_TOWN_FIX}, or {fix}"
+
+
 def _selector_names(entry: dict, atom: str, place: str, source: str) -> tuple[str, list[str]]:
     """(`junction` or `street`, the names it lists) of a road selector `{junction = "J12"}`."""
     keys_given = sorted(entry)
@@ -44,14 +50,16 @@ def selected_roads(entry: dict, atom: str, place: str, source: str, town: Town |
         if key == "junction":
             if name not in town.junctions:
                 raise InputError(source, place, f"state atom '{atom}': '{name}' is not a junction of the "
-                                 f"town ({town_name})", f"{OTHER_TOWN_FIX}, or use a junction of the town "
-                                 "(trustroute town roads TOWN --near X Y lists the roads near a point)")
+                                 f"town ({town_name})", other_town_fix(
+                                     "use a junction of the town (trustroute town roads TOWN --near X Y "
+                                     "lists the roads near a point)"))
             roads |= roads_into(town, name)
         else:
             found = roads_on_street(town, name)
             if not found:
                 raise InputError(source, place, f"state atom '{atom}': no road of the town ({town_name}) "
-                                 f"is on a street named '{name}'", f"{OTHER_TOWN_FIX}, or use a street name "
-                                 "the town's geometry gives (trustroute town roads TOWN --street NAME)")
+                                 f"is on a street named '{name}'", other_town_fix(
+                                     "use a street name the town's geometry gives (trustroute town "
+                                     "roads TOWN --street NAME)"))
             roads |= found
     return sorted(roads)

@@ -58,7 +58,7 @@ from trustroute.policies.logic.formula import (
     map_literals,
     parse_formula,
 )
-from trustroute.policies.logic.road_selectors import selected_roads
+from trustroute.policies.logic.road_selectors import other_town_fix, selected_roads
 
 N_TRUST_LEVELS = 7  # the Muir scale 1..7 of the default driver model (any number >= 2 is accepted)
 # The parser and DFA construction recurse over the formula; these limits keep them far from
@@ -375,7 +375,8 @@ def _check_roads(roads: list[str], owner: str, place: Callable[[str], str], sour
                              "write roads as \"U-V\"")
         if town is not None and road not in town.states:
             raise InputError(source, place(road), f"{owner}: '{road}' is not a directed road of the town "
-                             f"({town.source_path or 'given town'})", unknown_road_fix(town, road))
+                             f"({town.source_path or 'given town'})",
+                             other_town_fix(unknown_road_fix(town, road)))
 
 
 def _state_atoms(raw: Mapping[str, object], spec: _SpecSource,
@@ -496,7 +497,8 @@ def _check_start(start: str, spec: _SpecSource, town: Town | None) -> None:
     needles = (r"^\s*start\s*=",)
     if town is not None and start not in town.states:
         raise spec.error("start", needles, f"start road '{start}' is not a directed road of the "
-                         f"town ({town.source_path or 'given town'})", unknown_road_fix(town, start))
+                         f"town ({town.source_path or 'given town'})",
+                         other_town_fix(unknown_road_fix(town, start)))
     if "-" not in start:
         raise spec.error("start", needles, f"start '{start}' is not a directed road \"U-V\"",
                          'write start = "E-A"')

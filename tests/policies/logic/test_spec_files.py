@@ -246,14 +246,21 @@ def test_bad_selectors_name_the_atom_line_and_fix(town, selector, message):
     assert "state atom 'v1'" in str(info.value) and "line 8" in str(info.value)
 
 
-@pytest.mark.parametrize("selector", ['{junction = "J12"}', '{street = "Rudower Chaussee"}'])
-def test_a_selector_of_another_town_names_the_town_option(capsys, tmp_path, selector):
+@pytest.mark.parametrize(("old", "new"), [
+    ('v1 = ["B-G", "F-G", "I-G"]', 'v1 = {junction = "J12"}'),
+    ('v1 = ["B-G", "F-G", "I-G"]', 'v1 = {street = "Rudower Chaussee"}'),
+    ('v1 = ["B-G", "F-G", "I-G"]', 'v1 = ["-12345#0", "-6789#1"]'),   # a list of an imported town's roads
+    ('start = "E-A"', 'start = "-12345#0"'),
+])
+def test_a_name_of_another_town_names_the_town_option(capsys, tmp_path, old, new):
     """A spec written for an imported town, checked without --town (against the default town):
-    the fix names --town first, then the names the town has."""
+    whether it names its roads by selector or by list, the fix names --town first, then the names
+    the town has."""
     from tests.cli import run_cli
 
     spec = tmp_path / "drt.toml"
-    spec.write_text(PHI1_TEXT.replace('v1 = ["B-G", "F-G", "I-G"]', f"v1 = {selector}"))
+    assert old in PHI1_TEXT
+    spec.write_text(PHI1_TEXT.replace(old, new))
     code, _, err = run_cli(capsys, "spec", "check", str(spec))
     assert code == 2 and "(default town)" in err, err
     fix = "(fix: pass the town the spec is written for (--town; in a study config, town in [study]), or "
