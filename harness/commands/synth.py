@@ -160,7 +160,7 @@ def synth(spec_path: str, options: SynthOptions) -> None:
     low, high = outward(result.lower, result.upper, 6)
     lines = [f"{spec.name}: {low} <= Pr_max <= {high} (gap {result.gap:.2e}, "
              f"{result.seconds:.1f} s)"]
-    lines += bounds_notes(result)
+    lines += bounds_notes(result, options.tau)
     if options.belief_rule == "paper":
         # L and U are about the authors' belief MDP (their filter drives beliefs and labels); a
         # study measures the real process: observations drawn from the Bayes posterior.
@@ -227,7 +227,7 @@ def _synth_population(problem, objective: str, settings, out_path: str | None, a
                          {"policy": path, "policy_arrays": policy_arrays(path)})
     lines = population_lines(spec.name, population.n_types, objective, found,
                              summary["bayes"]["worst_type_value"])
-    lines += stop_notes(result)
+    lines += stop_notes(result, tau)
     lines.append(f"policy written to {path}")
     emit(as_json, payload, lines)
 
@@ -240,25 +240,49 @@ def population_lines(spec_name: str, n_types: int, objective: str, found, worst_
     low, high = outward(found.lower, found.upper, 6)
     lines = [f"{spec_name} ({n_types} driver types, objective {objective}): "
              f"{low} <= max {what} <= {high} (gap {found.gap:.2e}, {found.seconds:.1f} s)"]
-    lines.append("returned policy per type (exact, true driver of that type): " + "; ".join(
-        f"{v.name} (weight {v.weight:g}) {interval(v.lower, v.upper)}" for v in found.type_values))
-    prior = ", ".join(f"{p:g}" for p in found.prior)
-    lines.append(f"returned policy under the type prior: {interval(*found.mixture_value)}; worst type "
-                 f"{lower_text(found.worst_type_value)}; AV type prior {prior}")
+    lines.append("returned policy per type (true driver of that type): "
+                 + "; ".join(type_value_text(v) for v in found.type_values))
+    lines.append(f"returned policy under the population's weights: {interval(*found.mixture_value)}; "
+                 f"worst type {lower_text(found.worst_type_value)}; {prior_text(found)}")
     if objective == "robust":
         bayes_low, bayes_high = outward(found.bayes_lower, found.bayes_upper, 6)
         lines.append(f"Bayes-optimal synthesis beside it: {bayes_low} <= prior-weighted <= {bayes_high}, "
                      f"its worst type {lower_text(worst_bayes)}; robust value certified >= {low} (best of "
-                     f"{len(found.candidates)} candidate priors"
-                     f"{not_needed_note(found.candidates_not_needed)}), <= {high}")
+                     f"{counted(len(found.candidates), 'candidate prior')}{candidates_left_out(found)}), "
+                     f"<= {high}")
     return lines
 
 
-def not_needed_note(not_needed: int) -> str:
-    """What the robust summary adds when candidate priors were left out as not needed."""
-    if not not_needed:
-        return ""
-    return f"; {not_needed} more not run, the best being within tau of the bound"
+def type_value_text(value) -> str:
+    """One type's value (a TypeValue) as `synth` and `evaluate --population` print it: "exact" only
+    where its evaluation cut no history (`TypeValue.exact`: lower and upper differ by the certified
+    rounding alone), else "certified"; rounded outward either way."""
+    kind = "exact" if value.exact else "certified"
+    return f"{value.name} (weight {value.weight:g}) {kind} {interval(value.lower, value.upper)}"
+
+
+def prior_text(found) -> str:
+    """The type prior the returned policy's table was built for, told apart from the AV's belief:
+    the AV always filters with the population's weights, a candidate prior's table reading its
+    belief reweighted to that prior (docs/driver_types.md, "The robust objective")."""
+    weights = [float(w) for w in found.population.weights]
+    shown = ", ".join(f"{w:g}" for w in weights)
+    if all(abs(p - w) <= 1e-12 for p, w in zip(found.prior, weights, strict=True)):
+        return f"policy table built for the population's weights {shown}, with which the AV filters"
+    prior = ", ".join(f"{p:g}" for p in found.prior)
+    return (f"policy table built for the type prior {prior}; the AV filters with the population's "
+            f"weights {shown}, its belief reweighted to that prior for the table")
+
+
+def candidates_left_out(found) -> str:
+    """What the robust summary adds on the candidate priors not run: those left out once the best
+    was within tau of the bound, those skipped for want of time."""
+    text = ""
+    if found.candidates_not_needed:
+        text += f"; {found.candidates_not_needed} more not run, the best being within tau of the bound"
+    if found.candidates_skipped:
+        text += f"; {found.candidates_skipped} more skipped, the limit leaving no time for their runs"
+    return text
 
 
 @click.command("baseline")
@@ -415,5 +439,4 @@ def _evaluate_population(problem, policy, settings, as_json: bool, what: str) ->
         f"{spec.name} / {value.policy} over the population's {population.n_types} driver types: "
         f"P(satisfied) in {interval(value.lower, value.upper)}, E[final trust] = "
         f"{value.expected_final_trust:.4f}",
-        "per type: " + "; ".join(f"{t.name} (weight {t.weight:g}) {interval(t.lower, t.upper)}"
-                                 for t in types)])
+        "per type: " + "; ".join(type_value_text(t) for t in types)])

@@ -96,6 +96,7 @@ class RunSchedule:
     between: float = 0.0  # seconds spent between runs so far
     gaps: int = 0
     not_needed: int = 0   # candidate priors left out once the best was within tau of the bound
+    skipped: int = 0      # candidate priors left out for want of time
 
     def _close_gap(self) -> None:
         """Count the work since the last run ended (its evaluations) as one gap between runs."""
@@ -137,6 +138,7 @@ class RunSchedule:
     def skip(self, what: str) -> None:
         """A run left out for want of time (a candidate prior)."""
         self.runs -= 1
+        self.skipped += 1
         if self.on_phase is not None:
             self.on_phase(f"[{self.budget.elapsed():.1f} s] {what}: skipped, the time limit is reached")
 

@@ -92,12 +92,14 @@ CANDIDATE_SETUP_FACTOR = 2.0
 
 @dataclass(frozen=True)
 class TypeValue:
-    """Certified value [lower, upper] of a policy when the driver is of one type."""
+    """Certified value [lower, upper] of a policy when the driver is of one type; `exact`: its
+    evaluation cut no history, so lower and upper differ by the certified rounding alone."""
 
     name: str
     weight: float
     lower: float
     upper: float
+    exact: bool = False
 
     def to_dict(self) -> dict:
         return {"name": self.name, "weight": self.weight, "lower": self.lower, "upper": self.upper}
@@ -109,7 +111,8 @@ class TypeValue:
         histories of at most `max_junctions` steps under the true driver's constants `truth`
         (rounding.py: an evaluation sums the same products of observation probabilities as a
         search; the true driver's posterior gives them)."""
-        return cls(name, weight, *evaluation_widened(computed[0], computed[1], truth, max_junctions))
+        return cls(name, weight, *evaluation_widened(computed[0], computed[1], truth, max_junctions),
+                   exact=computed[0] == computed[1])
 
 
 def _mixture(weights: np.ndarray, ends: list[float]) -> tuple[float, float]:
@@ -157,6 +160,7 @@ class PopulationSynthesis:
     type_upper: tuple[float, ...] = ()  # U_k (robust objective)
     bayes_policy: RoutingPolicy | None = None   # the Bayes synthesis' policy (robust objective)
     candidates_not_needed: int = 0    # candidate priors not run: the best was within tau of `upper`
+    candidates_skipped: int = 0       # candidate priors not run for want of time
 
     @property
     def gap(self) -> float:
@@ -459,7 +463,8 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
         prior=tuple(float(p) for p in best_prior), type_values=best_values, lower=lower,
         upper=upper, seconds=seconds, bayes_lower=bayes.lower, bayes_upper=bayes.upper,
         bayes_type_values=bayes_values, candidates=candidates, type_upper=tuple(type_upper),
-        bayes_policy=bayes.policy, candidates_not_needed=schedule.not_needed)
+        bayes_policy=bayes.policy, candidates_not_needed=schedule.not_needed,
+        candidates_skipped=schedule.skipped)
 
 
 def policy_name(synthesis: PopulationSynthesis) -> str:
@@ -506,4 +511,5 @@ def summary(synthesis: PopulationSynthesis) -> dict:
         out["type_upper"] = list(synthesis.type_upper)
         out["candidates"] = synthesis.candidates
         out["candidates_not_needed"] = synthesis.candidates_not_needed
+        out["candidates_skipped"] = synthesis.candidates_skipped
     return out

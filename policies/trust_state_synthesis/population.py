@@ -242,4 +242,5 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
     return replace(found, objective="robust", result=result, prior=tuple(float(p) for p in prior),
                    type_values=best_values, lower=lower, upper=max(upper, lower),
                    seconds=time.perf_counter() - started, candidates=candidates, type_upper=type_upper,
-                   bayes_policy=bayes.policy, candidates_not_needed=schedule.not_needed)
+                   bayes_policy=bayes.policy, candidates_not_needed=schedule.not_needed,
+                   candidates_skipped=schedule.skipped)

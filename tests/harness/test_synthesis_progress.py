@@ -114,17 +114,19 @@ def test_a_robust_synthesis_prints_every_bound_rounded_outward():
     from trustroute.harness.commands.synth import population_lines
 
     below, above = (lambda x: x - 4e-8), (lambda x: x + 4e-8)
-    kinds = [SimpleNamespace(name="a", weight=0.5, lower=below(0.5), upper=above(0.5)),
-             SimpleNamespace(name="b", weight=0.5, lower=below(0.3), upper=above(0.6))]
+    kinds = [SimpleNamespace(name="a", weight=0.5, lower=below(0.5), upper=above(0.5), exact=True),
+             SimpleNamespace(name="b", weight=0.5, lower=below(0.3), upper=above(0.6), exact=False)]
     found = SimpleNamespace(lower=below(0.3), upper=above(0.3), gap=8e-8, seconds=1.0, type_values=kinds,
                             mixture_value=(below(0.4), above(0.55)), worst_type_value=below(0.3),
-                            prior=(0.5, 0.5), bayes_lower=below(0.4), bayes_upper=above(0.4),
-                            candidates=[{}], candidates_not_needed=0)
+                            prior=(0.5, 0.5), population=SimpleNamespace(weights=(0.5, 0.5)),
+                            bayes_lower=below(0.4), bayes_upper=above(0.4), candidates=[{}],
+                            candidates_not_needed=0, candidates_skipped=0)
     lines = population_lines("phi", 2, "robust", found, worst_bayes=below(0.2))
     assert lines[0].startswith("phi (2 driver types, objective robust): 0.299999 <= max worst type's "
                                "P(satisfied) <= 0.300001 "), lines[0]
-    assert "a (weight 0.5) [0.499999, 0.500001]; b (weight 0.5) [0.299999, 0.600001]" in lines[1]
+    assert ("a (weight 0.5) exact [0.499999, 0.500001]; b (weight 0.5) certified [0.299999, 0.600001]"
+            in lines[1])
     assert "[0.399999, 0.550001]; worst type 0.299999;" in lines[2], lines[2]
     assert lines[3] == ("Bayes-optimal synthesis beside it: 0.399999 <= prior-weighted <= 0.400001, its "
                         "worst type 0.199999; robust value certified >= 0.299999 (best of 1 candidate "
-                        "priors), <= 0.300001")
+                        "prior), <= 0.300001")

@@ -223,10 +223,24 @@ def policy_arrays(path: str | Path) -> Path:
     return array_path(path)
 
 
-def stop_notes(result: SynthesisResult) -> list[str]:
-    """What a reader should know of how the run ended: a search stopped at its node budget, which
-    more time would not have moved; bounds that are the cluster policies' at their largest cap,
-    or those a trust-state synthesis' own cap left (`joint_cap_note`)."""
+def stop_line(stopped_by: str, tau: float) -> str:
+    """Why the run ended, in the word `--json` gives as "stopped_by" (policies/work_clock.py,
+    `stopped_by`): the gap reached tau, or a limit or cap came first."""
+    if stopped_by == "convergence":
+        return f"stopped by: convergence (the gap reached tau = {tau:g})"
+    return f"stopped by: {stopped_by}, before the gap reached tau = {tau:g}"
+
+
+def stop_notes(result: SynthesisResult, tau: float) -> list[str]:
+    """What a reader should know of how the run ended: why (`stop_line`); then a search stopped at
+    its node budget, which more time would not have moved; bounds that are the cluster policies' at
+    their largest cap, or those a trust-state synthesis' own cap left (`joint_cap_note`)."""
+    said = [] if result.stopped_by is None else [stop_line(result.stopped_by, tau)]
+    return said + _stop_explained(result)
+
+
+def _stop_explained(result: SynthesisResult) -> list[str]:
+    """The note on a stop by a node budget or a cap of the method's own (none for the others)."""
     if result.stopped_by == "cluster cap":
         return [f"the bounds are the cluster policies' at their largest cap ({CLUSTER_CAPS[-1]} clusters "
                 "per junction, road and automaton state), tighter than the search's before them: a longer "
@@ -243,9 +257,9 @@ def stop_notes(result: SynthesisResult) -> list[str]:
             "--node-budget may (about 1 kB of memory a node)"]
 
 
-def bounds_notes(result: SynthesisResult) -> list[str]:
+def bounds_notes(result: SynthesisResult, tau: float) -> list[str]:
     """What a reader of the bounds should know: how the run ended, a cluster policy."""
-    lines = stop_notes(result)
+    lines = stop_notes(result, tau)
     table = result.policy.table if isinstance(result.policy, BeliefTablePolicy) else None
     boxes = table.boxes if table is not None else None
     if boxes is not None and boxes.rows:
