@@ -30,7 +30,9 @@ Entities:
                                               committed to, from each decision on
 - trust/true, trust/reported, trust/belief_mean   scalars (1-7) at each road's observation
 - belief/p_trust_ge_6, belief/<atom>, belief/<atom>_threshold   the belief predicates of the spec
-                                              (coeffs · b) and their thresholds (probability)
+                                              (coeffs · b) and their thresholds (probability), on
+                                              the logged belief over trust (a type-aware AV's
+                                              trust marginal; a type-belief atom is not drawn)
 - belief/distribution                         bar chart of the whole belief b(1..7)
 - state/control (autopilot/manual: takeover intervals as coloured bands), state/road, state/dfa
 - events                                      text log: road entered, incident in view, takeover,
@@ -474,13 +476,25 @@ def _observation_times(roads: pd.DataFrame) -> np.ndarray:
     return np.where(np.isnan(times), entered, times)
 
 
+def marginal_coefficients(coeffs: np.ndarray, n: int) -> np.ndarray | None:
+    """A belief atom's coefficients on the trust marginal of `n` levels: the atom's own, or the
+    first block of one tiled over a type-aware model's types (c·marginal(b) = tile(c, K)·b,
+    policies/belief/driver_types.py); None for a type-belief atom, which weighs the types apart and
+    so has no value on the trust marginal the roads table logs."""
+    blocks = coeffs.reshape(-1, n)
+    return blocks[0] if np.all(blocks == blocks[0]) else None
+
+
 def _log_series(rec: rr.RecordingStream, roads: pd.DataFrame, setup: EpisodeSetup) -> None:
     import rerun as rr
 
     times = _observation_times(roads)
     column = rr.TimeColumn(TIMELINE, duration=times)
-    levels = np.asarray(setup.driver_model.trust_levels, dtype=float)
     belief = np.array([np.asarray(b, dtype=float) for b in roads["belief_after"]])
+    n = belief.shape[1]
+    # The log holds the belief over trust: a type-aware AV's trust marginal, read with the base
+    # levels (a lifted model repeats them per type) and the atoms' coefficients on the marginal
+    levels = np.asarray(setup.driver_model.trust_levels, dtype=float)[:n]
     high = levels >= HIGH_TRUST
     series = {
         "trust/true": (roads["trust_after"].to_numpy(dtype=float), "true trust", (40, 40, 40)),
@@ -488,7 +502,9 @@ def _log_series(rec: rr.RecordingStream, roads: pd.DataFrame, setup: EpisodeSetu
         "belief/p_trust_ge_6": (belief[:, high].sum(axis=1), "P(trust >= 6)", (255, 215, 0)),
     }
     for i, (name, atom) in enumerate(sorted(setup.spec.belief_atoms.items())):
-        coeffs = np.asarray(atom.coeffs, dtype=float)
+        coeffs = marginal_coefficients(np.asarray(atom.coeffs, dtype=float), n)
+        if coeffs is None:
+            continue
         colour = WAYPOINT_COLORS[(i + 1) % len(WAYPOINT_COLORS)]
         series[f"belief/{name}"] = (belief @ coeffs, f"{name}: coeffs . b", colour)
         series[f"belief/{name}_threshold"] = (

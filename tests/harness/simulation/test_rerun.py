@@ -241,3 +241,38 @@ def test_time_views_open_on_the_whole_episode(tmp_path):
                 kinds += [union.type.field(int(code)).name for code in union.type_codes.to_pylist()]
     assert len(kinds) == 6, kinds  # trust, belief and state views, start and end each
     assert set(kinds) == {"Infinite"}, kinds
+
+
+def test_a_type_aware_avs_episode_is_recorded_on_its_trust_marginal(town, net_path, tmp_path):
+    """The `robust` condition's AV filters over (type, trust): the roads table logs its trust
+    marginal, and the recording's trust and belief series read that marginal with the base trust
+    levels and the spec's own coefficients."""
+    import rerun as rr
+
+    from trustroute.participants.driver_population import load_driver_population
+    from trustroute.policies.belief.driver_types import lift_population, lift_spec
+
+    population = load_driver_population("driver_population_three_types")
+    spec = load_spec(SPECS / "phi1.toml", town)
+    setup = EpisodeSetup(town=town, driver_model=lift_population(population),
+                         spec=lift_spec(spec, population), fallback_after=None)
+    synthetic = SyntheticDriver(population.types[0].model, np.random.default_rng(3), initial_trust=4)
+    path = tmp_path / "robust.rrd"
+    record = run_episode(setup, FixedRoute(INCIDENT_ROUTE), synthetic, "rr-robust", seed=2,
+                         options=EpisodeOptions(rrd_path=path, net_path=net_path))
+    belief = np.array(record.roads["belief_after"].tolist())
+    assert belief.shape[1] == 7
+    entities: dict[str, list] = {}
+    for chunk in rr.chunk.RrdReader(path).stream().to_chunks():
+        entities.setdefault(chunk.entity_path, []).append(chunk)
+    _, mean = _column(entities["/trust/belief_mean"], "Scalars:scalars")
+    np.testing.assert_allclose(np.ravel(mean), belief @ np.arange(1, 8))
+    _, high = _column(entities["/belief/p_trust_ge_6"], "Scalars:scalars")
+    np.testing.assert_allclose(np.ravel(high), belief[:, 5:].sum(axis=1))
+    for name, atom in spec.belief_atoms.items():
+        _, values = _column(entities[f"/belief/{name}"], "Scalars:scalars")
+        np.testing.assert_allclose(np.ravel(values), belief @ np.asarray(atom.coeffs))
+    from trustroute.harness.simulation.rerun_log import marginal_coefficients
+
+    # a type-belief atom (1 on the first type's block) has no value on the trust marginal
+    assert marginal_coefficients(np.repeat([1.0, 0.0, 0.0], 7), 7) is None
