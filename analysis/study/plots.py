@@ -2,7 +2,8 @@
 PNG_DPI with an SVG beside it (same name, for papers); legends sit outside the data.
 
 satisfaction_plot   satisfaction rate per spec and condition with exact (Clopper–Pearson) 95 %
-                    intervals, the policy's exact value and the synthesized [lower, upper] beside it
+                    intervals, each bar's n, the policy's exact value and the synthesized [lower,
+                    upper] beside it; a condition whose policy is only its fallback hatched
 paired_plot         per participant, mean reported trust under every condition joined by a line
                     (one panel per spec), satisfied episodes filled; above MAX_PAIRED_LINES
                     participants in a spec, lines would hide each other, so it shows the
@@ -31,6 +32,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from trustroute.analysis.study.display import FALLBACK_MARK
 from trustroute.core.dataset import PLOTS_DIR
 from trustroute.core.output_files import atomic_write_bytes
 from trustroute.networks.road import Road
@@ -54,6 +56,7 @@ def _pyplot():
 
 PNG_DPI = 200
 MIN_BAND_EPISODES = 10  # fewer reports at an index: its 95 % band would be noise across the scale
+BAND_LABEL = "95% CI: mean ± 1.96 SE, normal approx."   # how the trust band is computed (trust_series)
 MIN_LINE_EPISODES = 5   # fewer episodes still running at an index: no mean drawn there
 
 
@@ -101,6 +104,7 @@ def satisfaction_plot(cells: pd.DataFrame, path: Path, belief_source: str) -> Pa
     conditions = list(dict.fromkeys(cells["condition"])) if len(cells) else []
     width = 0.8 / max(1, len(conditions))
     fig, ax = plt.subplots(figsize=(1.8 + 2.2 * max(1, len(specs)), 3.6))
+    fallback_shown = False
     for cell in cells.to_dict("records"):
         if cell["satisfaction_rate"] is None or pd.isna(cell["satisfaction_rate"]):
             continue
@@ -115,6 +119,12 @@ def satisfaction_plot(cells: pd.DataFrame, path: Path, belief_source: str) -> Pa
             alpha=0.8,
             label=cell["condition"] if i == 0 else None,
         )
+        ax.text(x, 0.01, f"n={cell['n']}", ha="center", va="bottom", fontsize=7)
+        if bool(cell.get("fallback_only")):
+            # the cells table's mark: this rate measures the fallback, not a synthesized policy
+            ax.bar(x, rate, width * 0.9, fill=False, hatch="//", edgecolor="black", lw=0,
+                   label=None if fallback_shown else f"hatched:{FALLBACK_MARK}")
+            fallback_shown = True
         ax.errorbar(
             x, rate, yerr=[[rate - cell["ci_low"]], [cell["ci_high"] - rate]], color="black", capsize=4, lw=1
         )
@@ -262,7 +272,8 @@ def trust_plot(roads: pd.DataFrame, episodes: pd.DataFrame, path: Path, max_inde
             if len(band):
                 ax.fill_between(band.index, band["low"], band["high"], color=colour, alpha=0.2, lw=0)
             notes.append(f"{condition}: {cell_note(true, stats, band)}")
-            ax.plot(stats.index, stats["mean"], color=colour, label=f"{condition} reported (mean, 95% band)")
+            ax.plot(stats.index, stats["mean"], color=colour,
+                    label=f"{condition} reported (mean, {BAND_LABEL})")
             if true.notna().any():   # people's hidden trust (imported, live) is unknown: no line
                 ax.plot(true.index, true.values, color=colour, ls="--", lw=1, label=f"{condition} true")
         ax.set_title("\n".join([spec, *notes]), fontsize=8)

@@ -128,7 +128,8 @@ def test_a_trust_panel_draws_no_true_trust_where_none_is_known(tmp_path, monkeyp
     hidden = _cell(MIN_BAND_EPISODES + 2).assign(trust_after=None)
     panel = _trust_panel(tmp_path, monkeypatch, {"aware": hidden, "free": _cell(MIN_BAND_EPISODES + 2)})
     labels = [line.get_label() for line in panel.get_lines()]
-    assert labels == ["aware reported (mean, 95% band)", "free reported (mean, 95% band)", "free true"]
+    assert labels == ["aware reported (mean, 95% CI: mean ± 1.96 SE, normal approx.)",
+                      "free reported (mean, 95% CI: mean ± 1.96 SE, normal approx.)", "free true"]
 
 
 def test_a_plot_interrupted_while_it_is_saved_leaves_the_old_file(tmp_path, monkeypatch):
@@ -151,3 +152,27 @@ def test_a_plot_interrupted_while_it_is_saved_leaves_the_old_file(tmp_path, monk
         _trust_notes(tmp_path, monkeypatch, {"aware": _cell(MIN_BAND_EPISODES)})
     assert path.read_bytes() == b"the old plot"
     assert [p.name for p in tmp_path.iterdir()] == ["trust.png"]
+
+
+def test_the_satisfaction_plot_gives_each_bars_n_and_marks_a_fallback_only_condition(tmp_path, monkeypatch):
+    """A reader of the figure alone sees how many episodes each rate rests on and which condition
+    measured only its fallback (the cells table's mark, docs/study.md)."""
+    from trustroute.analysis.study import plots
+    from trustroute.analysis.study.display import FALLBACK_MARK
+
+    figures = []
+    real = plots._save
+    monkeypatch.setattr(plots, "_save", lambda fig, path, **kw: figures.append(fig) or real(fig, path, **kw))
+    cells = pd.DataFrame({"spec": ["phi1", "phi1", "phi2", "phi2"], "condition": ["aware", "free"] * 2,
+                          "n": [21, 21, 20, 19], "satisfaction_rate": [0.9, 0.8, 0.7, 0.6],
+                          "ci_low": [0.7, 0.6, 0.5, 0.4], "ci_high": [1.0, 0.9, 0.85, 0.8],
+                          "fallback_only": [True, False, False, False]})
+    plots.satisfaction_plot(cells, tmp_path / "satisfaction.png", "true")
+    (fig,) = figures
+    (ax,) = fig.axes
+    texts = [t.get_text() for t in ax.texts]
+    assert sorted(t for t in texts if t.startswith("n=")) == ["n=19", "n=20", "n=21", "n=21"]
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert any(FALLBACK_MARK.strip() in label for label in labels), labels
+    hatched = [p for p in ax.patches if p.get_hatch()]
+    assert len(hatched) == 1 and hatched[0].get_height() == pytest.approx(0.9)
