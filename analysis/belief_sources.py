@@ -29,8 +29,10 @@ import numpy as np
 import pandas as pd
 
 from trustroute.harness.study.config import BELIEF_SOURCES as BELIEF_SOURCES  # the names, re-exported
+from trustroute.harness.study.config import StudyConfig
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
+from trustroute.policies.belief.observed import observed_beliefs
 
 # engines whose drivers are simulated from models the study config names ("true" exists)
 SIMULATED_ENGINES: tuple[str, ...] = ("model", "sumo")
@@ -48,7 +50,19 @@ def filters_differ(manifest: dict) -> bool:
 def neutral_belief_source(manifest: dict) -> str:
     """The source neutral to every condition: each driver's own exact filter ("true") in a
     simulated study, the driver's reports ("reported") in a live or imported one."""
-    return "true" if manifest.get("engine") in SIMULATED_ENGINES else "reported"
+    return neutral_source_of(manifest.get("engine"))
+
+
+def neutral_source_of(engine: object) -> str:
+    """The neutral source of a study on `engine`: "true" where its drivers are simulated."""
+    return "true" if engine in SIMULATED_ENGINES else "reported"
+
+
+def config_belief_source(config: StudyConfig) -> str:
+    """The primary source of the study `config` describes, before it runs (what `trustroute plan`
+    judges its simulated episodes on): the declared one, else the neutral one of its own engine,
+    the rule `default_belief_source` applies to the study's manifest."""
+    return config.belief_source or neutral_source_of(config.engine)
 
 
 def declared_belief_source(manifest: dict) -> str | None:
@@ -78,11 +92,17 @@ def source_label(source: str) -> str:
     }[source]
 
 
+def judged_on(source: str) -> str:
+    """How a plan (its terminal table, its pre-registration) names the source its satisfaction
+    power is computed on: the study's primary one, as its analysis will judge the episodes."""
+    return (f"satisfaction judged on beliefs from: {source} ({source_label(source)}), "
+            "the study's primary source")
+
+
 def refiltered(roads: pd.DataFrame, model: DriverModel, town: Town) -> pd.DataFrame:
     """`roads` (sorted by episode and index) with `belief_after` replaced by the exact Bayes filter
     of `model` run on the logged observations; its trust marginal for a type-aware model. An
     observation the model gives probability 0 keeps the belief (never a zero row)."""
-    from trustroute.policies.belief.driver_types import trust_marginal
     from trustroute.policies.model.trust_pomdp import build_pomdp
 
     roads = roads.sort_values(["episode_id", "index"], kind="stable").reset_index(drop=True)
@@ -99,12 +119,7 @@ def refiltered(roads: pd.DataFrame, model: DriverModel, town: Town) -> pd.DataFr
     incident[row, col] = [model.incident_index(str(i)) for i in roads["incident"].fillna("none")]
     takeover[row, col] = roads["takeover"].fillna(False).astype(bool).to_numpy().astype(np.int64)
     performance[row, col] = roads["performance"].fillna("succ").map(PERFORMANCE_INDEX).to_numpy()
-    beliefs = np.zeros((n, horizon, model.n_trust))
-    beliefs[:, 0] = model.initial_belief
-    for t in range(1, horizon):
-        before = beliefs[:, t - 1]
-        beliefs[:, t] = pomdp.filter(before, incident[:, t], takeover[:, t], performance[:, t])[0]
-    marginal = trust_marginal(model, beliefs[row, col])
+    marginal = observed_beliefs(pomdp, incident, takeover, performance)[row, col]
     return roads.assign(belief_after=list(marginal))
 
 

@@ -26,6 +26,7 @@ import numpy as np
 import pandas as pd
 
 from trustroute.networks.town import Town
+from trustroute.policies.belief.observed import reported_beliefs as reported_beliefs
 from trustroute.policies.belief.problem import reads_hidden_trust
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.logic.trace import evaluate_traces
@@ -103,23 +104,6 @@ def _padded(
     beliefs[row, col] = belief_flat
     reports[row, col] = report_flat
     return [str(i) for i in ids], states, beliefs, reports, lengths
-
-
-def reported_beliefs(filter_beliefs: np.ndarray, reports: np.ndarray, levels: tuple[int, ...]) -> np.ndarray:
-    """Point mass on the last reported level (carried forward); before any report, the AV's
-    initial belief (position 0 of the filter)."""
-    n, horizon, k = filter_beliefs.shape
-    out = np.repeat(filter_beliefs[:, :1, :], horizon, axis=1)
-    lookup = np.full(max(levels) + 2, -1, dtype=np.int64)
-    lookup[list(levels)] = np.arange(len(levels))
-    last = np.full(n, -1, dtype=np.int64)
-    for t in range(horizon):
-        reported = reports[:, t] >= 0
-        last[reported] = lookup[np.minimum(reports[reported, t], lookup.size - 1)]
-        has = np.flatnonzero(last >= 0)
-        out[has, t, :] = 0.0
-        out[has, t, last[has]] = 1.0
-    return out
 
 
 def episode_satisfaction(

@@ -14,8 +14,8 @@ The tests, named as the report names them, for every pair of conditions (A, B):
 - `mixed_model`: mean reported trust over every spec, the mixed model with a random intercept per
   participant (`mixed_trust_model`, spec as strata); effect: the difference in means. A REML
   fit per study, planned when asked for.
-Satisfaction is the episode's own verdict (the AV's filter): on the model engine with the AV's
-model as the drivers' this is every belief source's verdict.
+Satisfaction is judged on the study's primary belief source, as its analysis will judge it
+(harness/study/planning.py `source_satisfied`).
 """
 
 from __future__ import annotations

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 
+from trustroute.analysis.belief_sources import judged_on
 from trustroute.analysis.study.power import TESTS
 
 OUTCOMES = {"mcnemar": "spec satisfaction", "conditional_or": "spec satisfaction",
@@ -97,7 +98,8 @@ def preregistration_text(plan: Mapping, config: Mapping, versions: Mapping[str, 
         "",
         f"The sample size is {size_text}. Power by simulation (`trustroute plan`): "
         f"{plan['participants_model']} as the participants, sizes {plan['sizes']}, seed {plan['seed']}, "
-        f"{_simulations(plan)}, target power {plan['target']:g}. Minimal sizes:",
+        f"{_simulations(plan)}, target power {plan['target']:g}; {judged_on(plan['belief_source'])}. "
+        "Minimal sizes:",
         "",
         *minimal,
         "",

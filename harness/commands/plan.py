@@ -126,7 +126,10 @@ def plan(config_path: str, options: PlanOptions) -> None:
     progress = None if options.quiet or options.as_json else (lambda line: click.echo(line, err=True))
     run = plan_study(config_path, options.settings(), progress)
     figure = run.figure
-    lines = [*pilot_lines(run.pilot), *table_lines(run.table, run.minimal, options.target),
+    from trustroute.analysis.belief_sources import judged_on
+
+    lines = [judged_on(run.payload["belief_source"]), *pilot_lines(run.pilot),
+             *table_lines(run.table, run.minimal, options.target),
              f"power curve: {figure} and {figure.with_suffix('.svg')}"]
     paths = {"power_png": figure, "power_svg": figure.with_suffix(".svg")}
     if options.preregistration is not None:

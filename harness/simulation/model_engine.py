@@ -153,6 +153,8 @@ class BatchResult:
     decision_seconds: float = 0.0   # of `seconds`, in the policy's decisions
     # mean reported trust level per episode (NaN without a report), when reports were drawn
     mean_reported: np.ndarray | None = None
+    trace: BatchTrace | None = None   # what each episode drove and observed, when asked for
+
 
     def frame(self) -> pd.DataFrame:
         return pd.DataFrame(
@@ -166,6 +168,22 @@ class BatchResult:
                 "fallback_fired": self.fallback_fired,
             }
         )
+
+
+@dataclass(frozen=True, eq=False)
+class BatchTrace:
+    """What `simulate_batch`'s episodes drove and observed, int arrays [n, junction_cap + 1] padded
+    beyond each episode's `lengths` (junctions + 1): position 0 is the start road, position t the
+    t-th road driven, with its incident (index in the AV's model's list), takeover (0/1) and the
+    AV's performance (0 succ, 1 fail), and the level the driver reported there (-1: none), as the
+    roads table of the episode would log them (docs/dataset.md)."""
+
+    roads: np.ndarray
+    incident: np.ndarray
+    takeover: np.ndarray
+    performance: np.ndarray
+    reports: np.ndarray
+    lengths: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -209,6 +227,7 @@ def simulate_batch(
     drivers: Sequence[DriverModel] | None = None,
     driver_index: np.ndarray | None = None,
     report_accuracy: float | None = None,
+    trace: bool = False,
 ) -> BatchResult:
     """`count` model-engine episodes at once; returns the per-episode summaries.
 
@@ -222,6 +241,9 @@ def simulate_batch(
     `draw_report_batch`) and return their mean per episode; the reports then take uniforms of
     their own after each level's step, so the episodes are the per-episode path's in
     distribution, not draw for draw. None (the default): no reports, no draws for them.
+
+    trace: also return what every episode drove and observed (`BatchTrace`), for a belief source
+    other than the AV's own filter; it draws nothing.
     """
     index = (
         np.zeros(count, dtype=np.int64) if driver_index is None else np.asarray(driver_index, dtype=np.int64)
@@ -232,7 +254,7 @@ def simulate_batch(
     sampled = _sampled(setup.model, setup.spec, policy, true_drivers, setup.junction_cap,
                        setup.fallback_after, checked_belief_rule(setup.belief_rule))
     return _unfold(sampled, index, rng, None if report_accuracy is None else
-                   (float(report_accuracy), setup.report_every))
+                   (float(report_accuracy), setup.report_every), trace)
 
 
 def _decisions(sampled: _Sampled, live: np.ndarray, route_id: np.ndarray, routes: list[tuple[str, ...]],
@@ -282,7 +304,7 @@ def _decisions(sampled: _Sampled, live: np.ndarray, route_id: np.ndarray, routes
 
 
 def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator,
-            reports: tuple[float, int] | None = None) -> BatchResult:
+            reports: tuple[float, int] | None = None, trace: bool = False) -> BatchResult:
     """Episodes driven by drivers of kinds `index`, level by level: the verdicts, the policy's
     decisions, the driver's step (participants/driver_step.py) for every episode that moves, the
     AV's filter and DFA. Draws: initial trust of every episode, then per level the policy's (if it
@@ -311,6 +333,7 @@ def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator,
     report_sum = np.zeros(count, dtype=float)
     report_count = np.zeros(count, dtype=np.int64)
     policy_calls, decision_seconds = 0, 0.0
+    traced = _new_trace(count, sampled.junction_cap, road) if trace else None
 
     for _level in range(sampled.junction_cap + 1):
         running = end == 0
@@ -357,6 +380,12 @@ def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator,
             said = draw_report_batch(theta[reporters], reports[0], levels.size, rng)
             report_sum[reporters] += levels[said]
             report_count[reporters] += 1
+            if traced is not None:
+                traced.reports[reporters, junctions[reporters]] = levels[said]
+        if traced is not None:
+            at = junctions[movers]
+            traced.roads[movers, at], traced.incident[movers, at] = x2, inc_av
+            traced.takeover[movers, at], traced.performance[movers, at] = h, e
     else:
         end[end == 0] = END_CODES.index("cap")
 
@@ -373,7 +402,20 @@ def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator,
         decision_seconds=decision_seconds,
         mean_reported=None if reports is None else np.divide(
             report_sum, report_count, out=np.full(count, np.nan), where=report_count > 0),
+        trace=None if traced is None else BatchTrace(
+            roads=traced.roads, incident=traced.incident, takeover=traced.takeover,
+            performance=traced.performance, reports=traced.reports, lengths=junctions + 1),
     )
+
+
+def _new_trace(count: int, junction_cap: int, start: np.ndarray) -> BatchTrace:
+    """An empty trace of `count` episodes starting on the roads `start` (lengths set at the end)."""
+    shape = (count, junction_cap + 1)   # small integers: a plan traces thousands of episodes at once
+    roads = np.zeros(shape, dtype=np.int32)
+    roads[:, 0] = start
+    return BatchTrace(roads=roads, incident=np.zeros(shape, dtype=np.int8),
+                      takeover=np.zeros(shape, dtype=np.int8), performance=np.zeros(shape, dtype=np.int8),
+                      reports=np.full(shape, -1, dtype=np.int8), lengths=np.zeros(count, dtype=np.int64))
 
 
 @dataclass(frozen=True)

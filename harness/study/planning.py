@@ -17,17 +17,23 @@ independent given its driver model, so the Williams square only rounds the sampl
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from trustroute.core.defaults import MAX_PARTICIPANTS
 from trustroute.core.errors import InputError
-from trustroute.harness.simulation.model_engine import simulate_batch
+from trustroute.harness.simulation.episode_tracker import EpisodeSetup
+from trustroute.harness.simulation.model_engine import BatchResult, simulate_batch
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import StudyContext
 from trustroute.harness.study.latin_square import williams_rows
 from trustroute.participants.driver_model import DriverModel
+from trustroute.policies.belief.driver_types import trust_marginal
+from trustroute.policies.belief.observed import observed_beliefs, reported_beliefs
+from trustroute.policies.logic.trace import evaluate_traces
+from trustroute.policies.model.trust_pomdp import build_pomdp
 
 
 @dataclass(frozen=True, eq=False)
@@ -92,10 +98,10 @@ def participant_sizes(spec: str, cells: int) -> list[int]:
 
 
 def simulate_studies(context: StudyContext, participants: int, studies: int, rng: np.random.Generator,
-                     model: ParticipantModel | None = None) -> SimulatedStudies:
+                     model: ParticipantModel | None = None, source: str = "true") -> SimulatedStudies:
     """`studies` studies of `participants` participants of the study whose context is `context`, on
     the model engine, drawn from `rng` (module docstring). model: the participants (default: the
-    config's driver model)."""
+    config's driver model); source: the belief source satisfaction is judged on (`source_satisfied`)."""
 
     config = context.config
     total = studies * participants
@@ -118,10 +124,12 @@ def simulate_studies(context: StudyContext, participants: int, studies: int, rng
     reported = np.full(satisfied.shape, np.nan)
     for s, spec in enumerate(specs):
         for c, condition in enumerate(conditions):
-            result = simulate_batch(context.setup(spec, condition), context.policies[(spec, condition)],
-                                    total, rng, drivers=drivers, driver_index=index,
-                                    report_accuracy=accuracy)
-            satisfied[:, :, s, c] = result.satisfied.reshape(studies, participants)
+            setup = context.setup(spec, condition)
+            result = simulate_batch(setup, context.policies[(spec, condition)], total, rng, drivers=drivers,
+                                    driver_index=index, report_accuracy=accuracy,
+                                    trace=not is_own_verdict(source, context, setup, drivers))
+            judged = source_satisfied(source, context, (spec, condition), result, (drivers, index))
+            satisfied[:, :, s, c] = judged.reshape(studies, participants)
             reported[:, :, s, c] = np.asarray(result.mean_reported).reshape(studies, participants)
     return SimulatedStudies(participants=participants, specs=specs, conditions=conditions,
                             satisfied=satisfied, reported=reported, models=drawn)
@@ -135,3 +143,56 @@ def check_plannable(config: StudyConfig) -> None:
                          "the config's [population] or [drivers]",
                          "remove them from the config you plan with and pass --driver, --population "
                          "or --pilot")
+
+
+def source_satisfied(source: str, context: StudyContext, cell: tuple[str, str], result: BatchResult,
+                     drivers: tuple[Sequence[DriverModel], np.ndarray]) -> np.ndarray:
+    """bool [n]: whether each episode of `result` (a `simulate_batch` of the (spec, condition)
+    `cell`, traced unless `source` is "filter") satisfied the spec on the belief `source`, as the
+    study's analysis judges a logged episode (docs/study.md, "Satisfaction from the logs"): "filter"
+    the AV's own verdict; "true" each episode's driver's exact filter (`drivers`: the true models
+    and each episode's index in them); "reference" one filter for every condition, the type-aware
+    model of the "robust" condition's population, else the study's driver model (plan refuses a
+    config's [drivers]); "reported" a point mass on the last report. The spec as written (belief
+    atoms over trust) is read on the trust marginals."""
+    setup = context.setup(*cell)
+    if is_own_verdict(source, context, setup, drivers[0]):
+        return result.satisfied
+    trace = result.trace
+    assert trace is not None, "simulate_batch(..., trace=True) gives the trace"
+    av, town = setup.driver_model, context.town
+    shape = (*trace.roads.shape, context.nominal.n_trust)
+    if source == "reported":
+        initial = np.broadcast_to(trust_marginal(av, av.initial_belief), shape)
+        beliefs = reported_beliefs(initial, trace.reports, context.nominal.trust_levels)
+    else:
+        models, index = (drivers if source == "true"
+                         else ([_reference_model(context)], np.zeros(shape[0], dtype=np.int64)))
+        beliefs = np.zeros(shape)
+        for k in np.unique(index).tolist():
+            rows = np.flatnonzero(index == k)
+            model = models[k]
+            ours = np.array([model.incident_index(name) for name in av.incident_types])   # AV's -> model's
+            incident = ours[trace.incident[rows]]
+            beliefs[rows] = observed_beliefs(build_pomdp(town, model), incident, trace.takeover[rows],
+                                             trace.performance[rows])
+    return evaluate_traces(context.specs[cell[0]], town, trace.roads, beliefs, trace.lengths).satisfied
+
+
+def is_own_verdict(source: str, context: StudyContext, setup: EpisodeSetup,
+                   drivers: Sequence[DriverModel]) -> bool:
+    """Whether `source` judges the cell's episodes as the AV itself did: "filter", or a source whose
+    every judging model is the AV's own filter model with the Bayes rule (the same filter on the
+    same observations: the participants are the config's driver model), so no trace is needed."""
+    if source == "filter":
+        return True
+    if source == "reported" or setup.belief_rule != "bayes":
+        return False
+    models = drivers if source == "true" else [_reference_model(context)]
+    return all(model is setup.driver_model for model in models)
+
+
+def _reference_model(context: StudyContext) -> DriverModel:
+    """The "reference" source's one filter (analysis/belief_sources.py `reference_model`): the
+    type-aware model the "robust" condition's AV filters with, else the study's driver model."""
+    return next((setup.driver_model for setup in context.condition_setups.values()), context.nominal)

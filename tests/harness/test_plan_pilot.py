@@ -56,14 +56,13 @@ def test_a_pilot_from_a_known_model_gives_that_models_power(config_path, pilot_s
     plan with the true model.
 
     Tolerance: the true power's Wilson 95 % interval (200 studies: ±0.07 at most) must meet the
-    pilot refits' 2.5-97.5 % range (`_agree`). 8 participants give a wide fit, and the bootstrap
-    of 8 understates it: measured over 9 pilots of the packaged model (pilot seeds 5-13, these
-    settings), the range met the true interval on φ2 in 8 and on both specs in 6 (the fit leans
-    towards larger effects: takeover probabilities at rarely visited high trust are pulled to the
-    incident's pooled rate, docs/planning.md). Pilot seed 7 is one of those that meet it; what this
-    test holds to is that the pilot's model reaches the simulation, with its uncertainty, and moves
-    the power as the model does: the wary pilot's φ2 range must miss the packaged model's power and
-    meet the wary model's, and that check fails if --pilot is ignored."""
+    pilot refits' 2.5-97.5 % range (`_agree`). 8 participants give a wide fit: measured over 9
+    pilots of the packaged model (pilot seeds 5-13, these settings), the range met the true
+    interval on φ1 in 9 and on φ2 in 8 (docs/planning.md). Pilot seed 7 is one of those that meet
+    it; what this test holds to is that the pilot's model reaches the simulation, with its
+    uncertainty, and moves the power as the model does: the wary pilot's φ2 range must meet the
+    wary model's power and its averaged power's interval lie above the packaged model's, which
+    fails if --pilot is ignored."""
     nominal_pilot = pilot_study(7)
     wary_pilot = pilot_study(5, extra=f'[drivers]\npopulation = "{wary[0]}"')
     truth = _rows(cli_json(capsys, "plan", str(config_path), *PLAN, "--out", str(tmp_path / "true")))
@@ -83,8 +82,9 @@ def test_a_pilot_from_a_known_model_gives_that_models_power(config_path, pilot_s
     wary_answer = _rows(cli_json(capsys, "plan", str(config_path), *PLAN, "--out", str(tmp_path / "wp"),
                                  "--pilot", str(wary_pilot), "--pilot-bootstrap", str(REFITS)))
     assert _agree(wary_truth["phi2"], wary_answer["phi2"])
-    assert not _agree(truth["phi2"], wary_answer["phi2"]), (truth["phi2"], wary_answer["phi2"])
-    assert wary_answer["phi2"]["power"] - truth["phi2"]["high"] > 0.3
+    # the wary pilot's averaged power lies above the packaged model's (each refit's drivers judged
+    # on their own filter, "true", the refits' range is wide: [0.08, 1.0] measured with seed 7)
+    assert wary_answer["phi2"]["low"] > truth["phi2"]["high"], (truth["phi2"], wary_answer["phi2"])
 
     code, out, err = run_cli(capsys, "plan", str(config_path), *PLAN, "--out", str(tmp_path / "text"),
                              "--pilot", str(nominal_pilot), "--pilot-bootstrap", "3")

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from trustroute.analysis.belief_sources import config_belief_source
 from trustroute.analysis.fitting.pilot import PilotFit, fit_pilot
 from trustroute.analysis.study.power import (
     DEFAULT_TESTS,
@@ -147,12 +148,14 @@ def plan_study(config_path: str | Path, settings: PlanSettings = PlanSettings(),
     model, pilot = participant_model(config, settings, progress is not None)  # a pilot: fitted here
     context = study_context(config, progress=progress is not None)  # every input, and the policies once
     streams: dict[int, np.random.Generator] = {}
+    # satisfaction is judged as the study's analysis will judge it: on its primary belief source
+    source = config_belief_source(study)
 
     def simulate(participants: int, studies: int):
         # one Generator per size, so a size's studies do not depend on the other sizes tried
         rng = streams.setdefault(participants, np.random.default_rng(
             np.random.SeedSequence(settings.seed, spawn_key=(participants,))))
-        sims = simulate_studies(context, participants, studies, rng, model)
+        sims = simulate_studies(context, participants, studies, rng, model, source)
         return sims.satisfied, sims.reported, sims.specs, sims.conditions, sims.models
 
     echo = None if progress is None else (lambda size, n: progress(f"  N={size}: {n} studies"))
@@ -170,7 +173,7 @@ def plan_study(config_path: str | Path, settings: PlanSettings = PlanSettings(),
     figure = power_curve_plot(table, settings.target, settings.alpha, folder / "power.png", title=title)
     payload = {
         "study": config.name, "config_path": str(config.source_path), "config_hash": study.content_hash,
-        "participants_model": who,
+        "participants_model": who, "belief_source": source,
         **({} if pilot is None else {"pilot": pilot.summary()}),
         "sizes": size_list, "tests": list(power.tests), "alpha": settings.alpha, "target": settings.target,
         "seed": settings.seed, "simulations": settings.simulations, "precision": power.precision,
