@@ -119,7 +119,8 @@ def satisfaction_plot(cells: pd.DataFrame, path: Path, belief_source: str) -> Pa
             alpha=0.8,
             label=cell["condition"] if i == 0 else None,
         )
-        ax.text(x, 0.01, f"n={cell['n']}", ha="center", va="bottom", fontsize=7)
+        ax.text(x, 0.01, f"n={cell['n']}", ha="center", va="bottom", fontsize=7, zorder=6,
+                bbox={"facecolor": "white", "edgecolor": "none", "pad": 1.0, "alpha": 0.8})
         if bool(cell.get("fallback_only")):
             # the cells table's mark: this rate measures the fallback, not a synthesized policy
             ax.bar(x, rate, width * 0.9, fill=False, hatch="//", edgecolor="black", lw=0,
