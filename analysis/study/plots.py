@@ -254,6 +254,7 @@ def paired_density_plot(per_participant: pd.DataFrame, conditions: tuple[str, ..
 
 def trust_plot(roads: pd.DataFrame, episodes: pd.DataFrame, path: Path, max_index: int = 30) -> Path:
     plt = _pyplot()
+    from matplotlib.ticker import MaxNLocator
     merged = roads[["episode_id", "index", "trust_after", "reported_trust"]].merge(
         episodes[["episode_id", "spec", "condition"]], on="episode_id"
     )
@@ -279,6 +280,7 @@ def trust_plot(roads: pd.DataFrame, episodes: pd.DataFrame, path: Path, max_inde
                 ax.plot(true.index, true.values, color=colour, ls="--", lw=1, label=f"{condition} true")
         ax.set_title("\n".join([spec, *notes]), fontsize=8)
         ax.set_xlabel("road index (junctions driven)")
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))   # a count of roads: no tick between two
         ax.set_ylim(1, 7)
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("mean trust (Muir 1-7)")

@@ -176,3 +176,14 @@ def test_the_satisfaction_plot_gives_each_bars_n_and_marks_a_fallback_only_condi
     assert any(FALLBACK_MARK.strip() in label for label in labels), labels
     hatched = [p for p in ax.patches if p.get_hatch()]
     assert len(hatched) == 1 and hatched[0].get_height() == pytest.approx(0.9)
+
+
+def test_the_trust_plots_road_index_has_whole_ticks(tmp_path, monkeypatch):
+    """A road index is a count of junctions: no tick between two roads (2.5, 7.5), whatever the
+    episodes' length."""
+    rng = np.random.default_rng(2)
+    long = pd.DataFrame([{"episode_id": f"e{e}", "index": i, "trust_after": int(rng.integers(1, 8)),
+                          "reported": float(rng.integers(1, 8))} for e in range(12) for i in range(14)])
+    panel = _trust_panel(tmp_path, monkeypatch, {"aware": long})
+    ticks = [t for t in panel.get_xticks() if panel.get_xlim()[0] <= t <= panel.get_xlim()[1]]
+    assert len(ticks) > 1 and all(float(t).is_integer() for t in ticks), ticks
