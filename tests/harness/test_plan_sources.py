@@ -93,3 +93,15 @@ def test_the_avs_own_model_judges_as_the_av(model_study):
                                 report_accuracy=0.8)
         judged = source_satisfied("true", context, cell, result, ([twin], np.zeros(4000, dtype=np.int64)))
         np.testing.assert_array_equal(judged, result.satisfied)
+
+
+def test_the_power_curve_names_the_source(configs, tmp_path, monkeypatch):
+    import trustroute.app.planning as planning
+
+    titles = []
+    real = planning.power_curve_plot
+    monkeypatch.setattr(planning, "power_curve_plot",
+                        lambda *args, title="", **kw: titles.append(title) or real(*args, title=title, **kw))
+    planning.plan_study(configs[0], planning.PlanSettings(sizes="6", simulations=10, tests=("mcnemar",),
+                                                          out=str(tmp_path)))
+    assert "satisfaction on beliefs from: true" in titles[0] and "grey dotted: α" in titles[0]

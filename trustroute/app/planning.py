@@ -164,12 +164,14 @@ def plan_study(config_path: str | Path, settings: PlanSettings = PlanSettings(),
     folder = Path(settings.out) if settings.out is not None else DEFAULT_OUT / config.name
     folder.mkdir(parents=True, exist_ok=True)
     who = model.label if model is not None else "the config's driver model"
-    title = (f"{config.name}: power by simulation ({who}; dashed: target {settings.target:g}, "
-             "dotted: minimal N)")
+    judged = f"satisfaction on beliefs from: {source}"
+    title = (f"{config.name}: power by simulation ({who}; {judged}; dashed: target {settings.target:g}, "
+             "dotted: minimal N, grey dotted: α)")
     if pilot is not None:
         title = (f"{config.name}: power by simulation from a pilot fit of {pilot.participants} participants "
-                 f"with {len(pilot.refits)} bootstrap refits\n(band: 95% Monte Carlo interval; dash-dotted: "
-                 f"the refits' powers, 2.5-97.5%; dashed: target {settings.target:g}, dotted: minimal N)")
+                 f"with {len(pilot.refits)} bootstrap refits; {judged}\n(band: 95% Monte Carlo interval; "
+                 f"dash-dotted: the refits' powers, 2.5-97.5%; dashed: target {settings.target:g}, dotted: "
+                 "minimal N, grey dotted: α)")
     figure = power_curve_plot(table, settings.target, settings.alpha, folder / "power.png", title=title)
     payload = {
         "study": config.name, "config_path": str(config.source_path), "config_hash": study.content_hash,
