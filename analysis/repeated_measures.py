@@ -157,18 +157,26 @@ EXACT_MODEL = "exact conditional (matched pairs)"
 def _separated_effect(base: ModelEffect, found: Separation, discordance: tuple[int, int, int],
                       level: float, sides: tuple[str, str]) -> ModelEffect:
     """The estimable effect on separated data: the exact conditional odds ratio of the matched pairs."""
-    b, c, unmatched = discordance
+    b, c, _ = discordance
     side = sides[0] if found.favours == "treated" else sides[1]
     kind = "complete separation" if found.kind == "complete" else "quasi-separation"
     reason = f"{kind}, {all_discordant_favour(b + c, side)} ({b} / {c}): the logit's OR is infinite"
+    return _matched_pairs_effect(base, discordance, level, reason)
+
+
+def _matched_pairs_effect(base: ModelEffect, discordance: tuple[int, int, int], level: float,
+                          reason: str) -> ModelEffect:
+    """The exact conditional odds ratio of the matched pairs (binomial of b among b + c: median-
+    unbiased estimate, exact interval, exact p), shown where the logit's fit cannot be, with why."""
+    b, c, unmatched = discordance
     if unmatched or b + c == 0:
         return replace(base, note=f"{reason}; no exact estimate (episodes not in matched pairs)")
     exact = exact_odds_ratio(b, c, level)
-    p = binomial_half_p(b, c)
+    opening = ", CI open above" if c == 0 else ", CI open below" if b == 0 else ""
     return replace(
-        base, model=EXACT_MODEL, estimate=exact.value, low=exact.low, high=exact.high, p_value=p,
-        note=f"{reason}; shown: the matched pairs' exact median-unbiased OR, CI open "
-        f"{'above' if c == 0 else 'below'}",
+        base, model=EXACT_MODEL, estimate=exact.value, low=exact.low, high=exact.high,
+        p_value=binomial_half_p(b, c), note=f"{reason}; shown: the matched pairs' exact median-unbiased "
+        f"OR{opening}",
     )
 
 
@@ -216,7 +224,16 @@ def conditional_logit(
             result = ConditionalLogit(y, exog, groups=groups).fit(disp=False, method="newton")
         beta, se = float(result.params[0]), float(result.bse[0])
         p = float(result.pvalues[0])
-    except (np.linalg.LinAlgError, ValueError) as exc:
+    except np.linalg.LinAlgError:
+        # a singular information matrix: another coefficient (a spec's, among the few informative
+        # participants) runs off to infinity while the treatment's need not; the matched pairs'
+        # exact conditional effect is the estimate that stays defined
+        pairs = matched_discordance(y, treated, groups, strata)
+        effect = _matched_pairs_effect(base, pairs, level, "the logit's information matrix is singular, "
+                                       "another effect being infinite or not identified "
+                                       f"among the discordant pairs ({pairs[0]} / {pairs[1]})")
+        return replace(effect, note=_joined(effect.note, dropped))
+    except ValueError as exc:
         return replace(base, note=_joined(f"fit failed ({type(exc).__name__})", dropped))
     if not (math.isfinite(beta) and math.isfinite(se)):
         return replace(base, note=_joined("the fit did not converge", dropped))

@@ -452,3 +452,20 @@ def test_holm_adjusts_one_family_as_statsmodels_does():
     assert holm(p) == pytest.approx(list(multipletests(p, method="holm")[1]))
     assert holm([0.02]) == [0.02]                        # one pair: nothing to adjust
     assert holm([None, 0.01, float("nan"), 0.02]) == [None, 0.02, None, 0.02]
+
+
+def test_conditional_logit_with_a_specs_effect_infinite_reports_the_matched_pairs():
+    """Two informative participants, one ahead under A on φ1, one ahead under B on φ2, the rest all
+    satisfied or all not (a study of 12 drivers of the three packaged types): the spec's coefficient
+    runs off to infinity while the treatment's stays finite, Newton's information matrix is
+    singular, and the row shows the matched pairs' exact conditional effect (b = c = 1) instead of
+    an empty 'fit failed'."""
+    pattern = [[(0, 0), (0, 1)], [(1, 0), (1, 1)]] + [[(0, 0), (0, 0)]] * 6 + [[(1, 1), (1, 1)]] * 4
+    outcome, treated, participant, spec = _paired_design(pattern)
+    assert separation(outcome, np.column_stack([treated, spec]), participant).kind == "none"
+    effect = conditional_logit(outcome, treated, participant, spec, sides=("aware", "free"))
+    assert effect.model == EXACT_MODEL
+    assert effect.estimate == pytest.approx(exact_odds_ratio(1, 1).value) == pytest.approx(1.0)
+    assert effect.low == pytest.approx(exact_odds_ratio(1, 1).low)
+    assert effect.p_value == pytest.approx(1.0)   # the exact two-sided binomial test of 1 of 2
+    assert "singular" in effect.note and "(1 / 1)" in effect.note
