@@ -3,7 +3,8 @@ source (harness/study/planning.py `source_satisfied`). Drivers of the three pack
 aware, robust and free: each AV's own filter ("filter") calls about 0.95 of the aware episodes
 satisfied where each driver's own model ("true", the neutral default) calls about 0.55, so a plan
 on the AV's filter would size a study for an effect its analysis does not see.
-(Horizon 3 keeps synthesis fast, as in tests/analysis/study/test_belief_sources.py.)"""
+(Horizon 3 keeps synthesis fast, as in tests/analysis/study/test_belief_sources.py; at that horizon
+aware and robust are their fallback, which the sources judge apart just as well.)"""
 
 from __future__ import annotations
 
