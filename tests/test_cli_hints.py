@@ -20,8 +20,8 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("trustroute", "networks", "participants", "policies", "harness", "analysis")
 HINT = re.compile(r"trustroute((?: [^\s`'\"(),;:]+)+)")
 # Words that follow "trustroute" in prose about the package itself ("the trustroute that made it",
-# "not a trustroute policy file"), never command names.
-PROSE = frozenset({"that", "writes", "reads", "policy", "or", "episode"})
+# "not a trustroute policy file", "the installed trustroute package"), never command names.
+PROSE = frozenset({"that", "writes", "reads", "policy", "or", "episode", "package"})
 
 
 def _docstrings(tree: ast.AST) -> set[int]:
