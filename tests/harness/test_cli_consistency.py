@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import json
+import re
+from pathlib import Path
 
 import click
 import pytest
 
 from tests.cli import every_command, run_cli
+
+ROOT = Path(__file__).resolve().parents[2]
 
 RESULT_COMMANDS = [("net", "build"), ("spec", "check"), ("model",), ("synth",), ("baseline",),
                    ("evaluate",), ("run",), ("study",), ("analyze",), ("fit",), ("demo",),
@@ -75,6 +79,18 @@ def test_study_json_quiet_and_analyze_writes_nothing_without_report(tmp_path, ca
     assert payload["analysis"]["cells"][0]["n"] == 2
     assert set(payload["paths"]) == {"episodes", "roads", "manifest", "report_markdown", "report_html",
                                      "plots"}
+
+
+def test_the_readme_names_exactly_the_commands_that_take_quiet():
+    """README.md's list of the commands taking `--quiet` is the CLI's: a command given the option,
+    or losing it, changes the sentence a user reads to silence it."""
+    readme = " ".join((ROOT / "README.md").read_text().split())
+    listed = re.search(r"((?:`[a-z -]+`(?:,| and)? )+)take `--quiet`", readme)
+    assert listed, "README.md has no sentence naming the commands that take `--quiet`"
+    named = set(re.findall(r"`([a-z -]+)`", listed.group(1)))
+    quiet = {path for path, command in every_command()
+             if any("--quiet" in param.opts for param in command.params)}
+    assert named == quiet, f"README.md names {sorted(named)}; the commands taking --quiet: {sorted(quiet)}"
 
 
 def test_every_spec_town_and_driver_says_it_takes_a_packaged_name():
