@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
+
 import pytest
 
 from tests.cli import assert_one_line_error, run_cli
@@ -69,3 +72,12 @@ def test_demo_paper_size_in_sumo_with_recording(tmp_path, capsys):
     assert (out / "p00000-phi1-aware.rrd").stat().st_size > 0
     assert (out / "kinematics.parquet").exists() and (out / "report.md").exists()
     assert "episode recording:" in text
+    # README.md quotes the synthesized bounds "printed by `make demo`": they are the printed ones.
+    readme = " ".join((Path(__file__).resolve().parents[2] / "README.md").read_text().split())
+    bounds = r"(\[[\d.]+, [\d.]+\])"
+    quoted = re.search(rf"H = 20: {bounds} / {bounds} \(printed by `make demo`", readme)
+    assert quoted, "README.md quotes no H = 20 bounds printed by `make demo`"
+    for spec, shown in zip(("phi1", "phi2"), quoted.groups(), strict=True):
+        printed = re.search(rf"Pr_max\({spec}\), synthesized, ours within H=20 junctions +\S+ +{bounds}",
+                            text)
+        assert printed and printed.group(1) == shown, (spec, shown, printed and printed.group(0))
