@@ -23,6 +23,18 @@ def _pyplot():
 
 def power_curve_plot(table: Sequence[Power], target: float, alpha: float, path: Path,
                      title: str = "") -> Path:
+    fig = power_curve_figure(table, target, alpha, title)
+    save_figure(fig, path, dpi=PNG_DPI)
+    save_figure(fig, vector_path(path))
+    _pyplot().close(fig)
+    return Path(path)
+
+
+def power_curve_figure(table: Sequence[Power], target: float, alpha: float, title: str = ""):
+    """The figure of `power_curve_plot`, unsaved. Sample sizes are whole participants: the
+    x axis ticks only integers (a plan of one or two sizes would otherwise read 7.6, 7.8, ...)."""
+    from matplotlib.ticker import MaxNLocator
+
     plt = _pyplot()
     tests = list(dict.fromkeys(p.test for p in table))
     minimal = minimal_sizes(table, target)
@@ -47,7 +59,10 @@ def power_curve_plot(table: Sequence[Power], target: float, alpha: float, path: 
                 ax.annotate(f"N={found}", (found, 0.03 + 0.07 * k), color=colour, fontsize=7,
                             xytext=(3, 0), textcoords="offset points")
         ax.axhline(target, color="black", ls="--", lw=1)
-        ax.axhline(alpha, color="grey", ls=":", lw=0.8)
+        ax.axhline(alpha, color="grey", ls=":", lw=0.8)   # the power of a test where there is no effect
+        ax.annotate(f"α = {alpha:g}", (1.0, alpha), xycoords=("axes fraction", "data"), color="grey",
+                    fontsize=7, ha="right", va="bottom", xytext=(-3, 1), textcoords="offset points")
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True, min_n_ticks=1))
         ax.set_ylim(0, 1.02)
         ax.set_title(TESTS[test], fontsize=9)
         ax.set_xlabel("participants")
@@ -56,7 +71,4 @@ def power_curve_plot(table: Sequence[Power], target: float, alpha: float, path: 
     axes[0][0].set_ylabel(f"power at α = {alpha:g} (95% interval)")
     fig.suptitle(title or f"Power by simulation (dashed: target {target:g}; dotted: minimal N)", fontsize=9)
     fig.tight_layout()
-    save_figure(fig, path, dpi=PNG_DPI)
-    save_figure(fig, vector_path(path))
-    plt.close(fig)
-    return Path(path)
+    return fig
