@@ -149,7 +149,7 @@ def source_satisfied(source: str, context: StudyContext, cell: tuple[str, str], 
                      drivers: tuple[Sequence[DriverModel], np.ndarray]) -> np.ndarray:
     """bool [n]: whether each episode of `result` (a `simulate_batch` of the (spec, condition)
     `cell`, traced unless `source` is "filter") satisfied the spec on the belief `source`, as the
-    study's analysis judges a logged episode (docs/study.md, "Satisfaction from the logs"): "filter"
+    study's analysis judges a logged episode (docs/study.md, its item on satisfaction from the logs): "filter"
     the AV's own verdict; "true" each episode's driver's exact filter (`drivers`: the true models
     and each episode's index in them); "reference" one filter for every condition, the type-aware
     model of the "robust" condition's population, else the study's driver model (plan refuses a
