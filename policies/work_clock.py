@@ -9,7 +9,8 @@ unfolded histories: `spend`), each unit worth WORK_UNIT_SECONDS of the scheduler
 schedule then depends on the work done only, so the same problem stops at the same point on any
 machine and under any load. The wall-clock time limit stays a safety net: once it has passed,
 the clock reads LATE, past every deadline, and the run stops as it would at its time limit (its
-result then depends on the clock; `WorkClock.timed_out` says so).
+result then depends on the clock; `WorkClock.timed_out` says so, and `stopped_by` names the time
+limit).
 
 The clock is ambient as time.perf_counter() is: `work_clock` installs it for the duration of one
 synthesis call (the outermost one: a population synthesis' runs share it), and `now` and `spend`
@@ -113,17 +114,20 @@ CAPS = ("cluster cap", "node cap", "junction cap", "depth cap", "rounding margin
 
 def stopped_by(converged: bool, clock: WorkClock | None, node_budget: bool = False,
                cap: str | None = None) -> str:
-    """Which limit ended a synthesis (or the evaluation of its policy): "convergence" (the gap
-    reached tau), "node budget" (its search stopped at its node budget, `node_budget`, before any
-    limit), `cap` (one of CAPS: its bounds are those its own cap left, unless a run under a work
-    limit reached the wall clock, whose stop then depends on the machine), "work limit" (its work
-    limit, the wall clock never reached) or "time limit"."""
+    """Which limit ended a synthesis (or the evaluation of its policy): "time limit" when a run
+    under a work limit reached the wall clock, whatever else it reached (past it every deadline
+    read LATE: a run, a search or an evaluation may have been cut where the work limit would not
+    have, so its result depends on the machine); else "convergence" (the gap reached tau), "node
+    budget" (its search stopped at its node budget, `node_budget`, before any limit), `cap` (one of
+    CAPS: its bounds are those its own cap left), "work limit" (its work limit) or "time limit"."""
     if cap is not None and cap not in CAPS:
         raise ValueError(f"unknown cap {cap!r}: one of {CAPS}")
+    if clock is not None and clock.timed_out:
+        return "time limit"
     if converged:
         return "convergence"
     if node_budget:
         return "node budget"
-    if cap is not None and (clock is None or not clock.timed_out):
+    if cap is not None:
         return cap
-    return "work limit" if clock is not None and not clock.timed_out else "time limit"
+    return "work limit" if clock is not None else "time limit"

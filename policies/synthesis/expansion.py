@@ -73,8 +73,9 @@ NODES_PER_UNIT = 2
 
 class BeliefSearch:
     """The search's state: the node store, the abstraction's bound, the moves, the free completion,
-    and the moves of the last backup. `budget`: the synthesis' start (abstraction_seconds counts
-    from it) and this search's deadline (the bounded abstraction stops there)."""
+    and the moves of the last backup. `budget`: the synthesis' start (abstraction_seconds and
+    abstraction_clock_seconds count from it) and this search's deadline (the bounded abstraction
+    stops there)."""
 
     def __init__(self, tables: ProductTables, settings: SynthesisSettings, horizon: int | None,
                  budget: TimeBudget, unbounded_value: np.ndarray | None = None,
@@ -106,6 +107,7 @@ class BeliefSearch:
             self.bound_note = ("the unbounded abstraction's least fixed point from above, end "
                                "components collapsed (policies/synthesis/end_components.py)")
         self.abstraction_seconds = budget.elapsed()
+        self.abstraction_clock_seconds = budget.used()
         n_outcomes = max(len(s) for s in self.symbols.by_incident)
         # symbol ids per incident, padded with -1
         self.symbols_of_incident = np.full((len(self.symbols.by_incident), n_outcomes), -1, dtype=np.int64)

@@ -286,8 +286,10 @@ def within_tau(values: Iterable[TypeValue], bound: float, tau: float) -> bool:
 
 def setup_seconds(result: BeliefSynthesis) -> float:
     """A synthesis run's fixed costs before its search could expand (the exact filter, the product,
-    the abstraction), as its search runs report them."""
-    return max((run.abstraction_seconds for run in result.stats.runs if isinstance(run, SearchRun)),
+    the abstraction), as its search runs report them on the synthesis' clock: under a work limit
+    the work they took, so that whether a candidate runs and how long it is given depend on the
+    work done, not on the machine's load."""
+    return max((run.abstraction_clock_seconds for run in result.stats.runs if isinstance(run, SearchRun)),
                default=0.0)
 
 

@@ -258,7 +258,8 @@ def _search_run(search: BeliefSearch, roots: np.ndarray, suffix_length: int, clo
     open_nodes = g.kind[: g.n] == FRONTIER
     return SearchRun(
         horizon=search.horizon, suffix_length=suffix_length, abstract_cells=search.cells.n_cells,
-        abstraction_seconds=search.abstraction_seconds, abstraction_bound=search.bound_note,
+        abstraction_seconds=search.abstraction_seconds,
+        abstraction_clock_seconds=search.abstraction_clock_seconds, abstraction_bound=search.bound_note,
         abstraction_root_upper=float(search.frontier_upper(0, g.x[roots], g.q[roots],
                                                            g.cell[roots]).max()),
         root_dfa_states=tuple(g.q[roots].tolist()),

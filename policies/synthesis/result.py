@@ -95,7 +95,11 @@ class SearchRun(Record):
     horizon: int | None
     suffix_length: int
     abstract_cells: int
-    abstraction_seconds: float
+    abstraction_seconds: float          # wall-clock seconds from the synthesis' start to its search
+    # the same fixed costs on the synthesis' clock (policies/work_clock.py: the work done, in the
+    # scheduler's seconds, under a work limit; the wall clock without one): what a schedule
+    # predicts the next run's fixed costs from (population.py, setup_seconds)
+    abstraction_clock_seconds: float
     abstraction_bound: str
     abstraction_root_upper: float
     root_dfa_states: tuple[int, ...]

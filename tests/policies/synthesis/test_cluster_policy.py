@@ -289,3 +289,18 @@ def test_bounds_of_the_largest_cluster_cap_are_said_to_end_the_run():
     in_time = WorkClock(limit=10, wall_deadline=1e18)
     assert stopped_by(False, late, cap="cluster cap") == "time limit"
     assert stopped_by(False, in_time, cap="cluster cap") == "cluster cap"
+
+
+def test_a_work_limited_run_that_reached_the_wall_clock_names_the_time_limit_whatever_else():
+    """Past the wall clock every deadline reads late, so a run, a search or an evaluation may have
+    been cut where the work limit would not have: converged or at its node budget, such a run's
+    result depends on the machine, and `stopped_by` says so (what result_digest refuses)."""
+    from trustroute.policies.work_clock import WorkClock, stopped_by
+
+    late = WorkClock(limit=10, wall_deadline=0.0, timed_out=True)
+    in_time = WorkClock(limit=10, wall_deadline=1e18)
+    assert stopped_by(True, late) == "time limit"
+    assert stopped_by(False, late, node_budget=True) == "time limit"
+    assert stopped_by(True, in_time) == "convergence"
+    assert stopped_by(False, in_time, node_budget=True) == "node budget"
+    assert stopped_by(False, in_time) == "work limit"

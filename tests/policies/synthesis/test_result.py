@@ -13,7 +13,8 @@ from trustroute.policies.synthesis.result import (
     SynthesisStats,
 )
 
-SEARCH_KEYS = ["horizon", "suffix_length", "abstract_cells", "abstraction_seconds", "abstraction_bound",
+SEARCH_KEYS = ["horizon", "suffix_length", "abstract_cells", "abstraction_seconds",
+               "abstraction_clock_seconds", "abstraction_bound",
                "abstraction_root_upper", "root_dfa_states", "lower_strict_labels",
                "completion_closed", "completion_bounds", "free_tree_leaves", "completion_seconds",
                "completion_clusters", "compressed", "macro_width", "row_conflicts", "nodes",
@@ -23,6 +24,7 @@ SEARCH_KEYS = ["horizon", "suffix_length", "abstract_cells", "abstraction_second
 
 def _search_run(**changes) -> SearchRun:
     run = SearchRun(horizon=None, suffix_length=2, abstract_cells=7, abstraction_seconds=0.1,
+                    abstraction_clock_seconds=0.1,
                     abstraction_bound="b", abstraction_root_upper=1.0, root_dfa_states=(0, 2),
                     lower_strict_labels=0.4, completion_closed=True,
                     completion_bounds=False, free_tree_leaves=4.0, completion_seconds=0.0,

@@ -33,6 +33,14 @@ def _dragging_clock(step: float = 0.02):
     return perf_counter
 
 
+def _slow_clock(factor: float = 20.0):
+    """time.perf_counter() of a machine `factor` times slower (or as loaded): every interval from
+    now on reads `factor` times as long."""
+    real = time.perf_counter
+    start = real()
+    return lambda: start + factor * (real() - start)
+
+
 TIMED = ("seconds", "created")   # what a policy file and the statistics say of the time taken
 
 
@@ -109,6 +117,33 @@ def test_the_runs_of_a_population_synthesis_share_the_work_limit(monkeypatch):
     assert first.result.stopped_by == second.result.stopped_by == "work limit"
     assert (first.lower, first.upper, first.candidates) == (second.lower, second.upper, second.candidates)
     assert [(v.lower, v.upper) for v in first.type_values] == [(v.lower, v.upper) for v in second.type_values]
+
+
+def test_a_robust_population_synthesis_under_a_work_limit_ignores_a_slow_clock(monkeypatch, tmp_path):
+    """Whether a candidate prior runs and the limit it is given follow the Bayes run's fixed costs
+    on the work clock (population.py, setup_seconds): a machine 20 times slower (or as loaded)
+    runs the same candidates to the same robust policy, where fixed costs read off the wall clock
+    would look 20 times larger and leave more candidates out."""
+    settings = dict(horizon=6, population=POPULATION, objective="robust", work_limit=300_000,
+                    time_limit=SLOW)
+    first = trustroute.synthesize("phi1_strict", **settings, out=tmp_path / "first.json")
+    monkeypatch.setattr(time, "perf_counter", _slow_clock(20.0))
+    second = trustroute.synthesize("phi1_strict", **settings, out=tmp_path / "second.json")
+    assert first.result.stopped_by == second.result.stopped_by == "work limit"
+    assert first.candidates_skipped > 0          # the work limit, not the grid, ends the candidates
+    assert (first.candidates, first.candidates_skipped) == (second.candidates, second.candidates_skipped)
+    assert (first.lower, first.upper, first.prior) == (second.lower, second.upper, second.prior)
+    assert [(v.lower, v.upper) for v in first.type_values] == [(v.lower, v.upper) for v in second.type_values]
+    assert _policy_file(tmp_path / "first.json") == _policy_file(tmp_path / "second.json")
+
+
+def test_a_robust_population_synthesis_the_wall_clock_cut_says_so(monkeypatch):
+    """The control: the same slow clock past the time limit cuts the runs under a work limit never
+    reached, and the result names the time limit (what result_digest refuses)."""
+    monkeypatch.setattr(time, "perf_counter", _slow_clock(20.0))
+    cut = trustroute.synthesize("phi1_strict", horizon=6, population=POPULATION, objective="robust",
+                                work_limit=10**9, time_limit=5.0)
+    assert cut.result.stopped_by == "time limit" and cut.candidates_skipped > 0
 
 
 def test_a_search_stopped_by_its_node_budget_says_so(capsys, tmp_path):
