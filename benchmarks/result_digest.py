@@ -12,7 +12,9 @@ Every synthesis runs under a work limit (`--work-limit`, policies/work_clock.py)
 shares, its predictions of what still fits and its stop are then on the work done, not the wall
 clock (a bounded synthesis that converges still schedules its phases by shares of its limit, and
 under load the wall clock moved them: phi2 at H = 20 gave another policy at load 9 to 16), and the
-time limit, far above, is only a safety net; so no result depends on the machine's load.
+time limit, far above, is only a safety net; so no result depends on the machine's load. An entry
+the wall clock cut all the same (its synthesis says `"stopped_by": "time limit"`) gets no digest: one
+line names it and the fix (rerun on a quieter machine or raise its time limit), exit 2.
 Two digests are compared with `python -m benchmarks.result_digest A.json B.json`; `--only PREFIX`
 (repeatable) runs only the entries whose names start with a prefix (e.g. `--only phi1_H20 --only
 study_model`).
@@ -31,6 +33,8 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+
+from trustroute.core.errors import InputError
 
 REPO = Path(__file__).resolve().parents[1]
 CLI = [sys.executable, "-m", "trustroute"]
@@ -101,6 +105,21 @@ def _table_digest(path: Path) -> str:
     return _digest("\n".join([header, *sorted(rows)]).encode())
 
 
+def refuse_clock_cut(name: str, args: list[str], answer: dict) -> None:
+    """Stop, with one line and exit 2, when the wall clock cut a synthesis run under a work limit
+    (`"stopped_by": "time limit"`, policies/work_clock.py: past its time limit every deadline reads
+    late, so a run, a search or an evaluation may have been cut where the work limit would not
+    have): its digest would depend on the machine's load and differ silently."""
+    if "--work-limit" not in args or answer["stopped_by"] != "time limit":
+        return
+    limit = args[args.index("--time-limit") + 1]
+    error = InputError(name, "", f"the wall clock cut its synthesis under its work limit (stopped by its "
+                       f"{limit} s time limit), so its result depends on the machine's load",
+                       "rerun on a quieter machine or raise its time limit")
+    print(error.one_line(), file=sys.stderr)
+    raise SystemExit(2)
+
+
 def digest(work: Path, only: list[str]) -> dict:
     results: dict = {}
 
@@ -112,9 +131,7 @@ def digest(work: Path, only: list[str]) -> dict:
             continue
         out = work / f"{name}.json"
         answer = _run(["synth", *args, "--out", str(out)], REPO)
-        if "--work-limit" in args and answer["stopped_by"] == "time limit":
-            raise SystemExit(f"{name}: stopped by its time limit before its work limit; its result "
-                             "depends on the machine's load (lower the work limit)")
+        refuse_clock_cut(name, args, answer)
         population = ["--population", str(POPULATION)] if "--population" in args else []
         evaluation = _run(["evaluate", args[0], str(out), *population], REPO)
         results[name] = {

@@ -1,0 +1,35 @@
+"""benchmarks/result_digest.py gives no digest of an entry the wall clock cut: its result would
+depend on the machine's load, and two digests of one commit would differ silently."""
+
+from __future__ import annotations
+
+import pytest
+
+from benchmarks import result_digest
+
+ENTRY = "phi1_strict_robust_H10"
+
+
+def test_an_entry_the_wall_clock_cut_gets_no_digest_but_one_line_and_exit_2(monkeypatch, capsys, tmp_path):
+    calls = []
+
+    def run(args: list[str], cwd) -> dict:
+        calls.append(args[0])
+        return {"lower": 0.78, "upper": 0.83, "stopped_by": "time limit"}
+
+    monkeypatch.setattr(result_digest, "_run", run)
+    out = tmp_path / "digest.json"
+    with pytest.raises(SystemExit) as stopped:
+        result_digest.main([str(out), "--only", ENTRY])
+    assert stopped.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    assert err.startswith(f"{ENTRY}: ") and "rerun on a quieter machine or raise its time limit" in err
+    assert "600 s time limit" in err
+    assert calls == ["synth"] and not out.exists()     # not evaluated, no digest written
+
+
+@pytest.mark.parametrize("stopped_by", ["work limit", "convergence"])
+def test_an_entry_its_work_limit_or_convergence_ended_is_digested(stopped_by):
+    args = dict(result_digest.SYNTHESES)[ENTRY]
+    result_digest.refuse_clock_cut(ENTRY, args, {"stopped_by": stopped_by})     # no exit
