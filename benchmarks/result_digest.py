@@ -30,6 +30,7 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 import pandas as pd
@@ -176,8 +177,9 @@ def main(argv: list[str]) -> None:
         differing = [k for k in keys if a.get(k) != b.get(k)]
         print("identical" if not differing else f"differ: {differing}")
         raise SystemExit(1 if differing else 0)
-    with tempfile.TemporaryDirectory() as tmp:
-        os.environ["XDG_CACHE_HOME"] = str(Path(tmp) / "cache")
+    # the commands it runs cache in a fresh root; the caller's environment is left as it was
+    with tempfile.TemporaryDirectory() as tmp, \
+            mock.patch.dict(os.environ, {"XDG_CACHE_HOME": str(Path(tmp) / "cache")}):
         results = digest(Path(tmp), args.only)
     Path(args.paths[0]).write_text(json.dumps(results, indent=1, sort_keys=True) + "\n")
 

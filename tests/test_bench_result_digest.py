@@ -3,6 +3,8 @@ depend on the machine's load, and two digests of one commit would differ silentl
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from benchmarks import result_digest
@@ -33,3 +35,12 @@ def test_an_entry_the_wall_clock_cut_gets_no_digest_but_one_line_and_exit_2(monk
 def test_an_entry_its_work_limit_or_convergence_ended_is_digested(stopped_by):
     args = dict(result_digest.SYNTHESES)[ENTRY]
     result_digest.refuse_clock_cut(ENTRY, args, {"stopped_by": stopped_by})     # no exit
+
+
+def test_a_digest_run_leaves_the_callers_cache_root_as_it_was(monkeypatch, capsys, tmp_path):
+    # the digest's commands cache in a root of their own; the process that ran it (a test worker)
+    # keeps its own cache root afterwards
+    before = os.environ.get("XDG_CACHE_HOME")
+    monkeypatch.setattr(result_digest, "digest", lambda work, only: {})
+    result_digest.main([str(tmp_path / "out.json"), "--only", ENTRY])
+    assert os.environ.get("XDG_CACHE_HOME") == before
