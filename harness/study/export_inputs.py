@@ -11,16 +11,16 @@ trustroute package ships them: its specs, town and driver model, found as its an
 `study_config.json` naming them there.
 
 Nothing is read from outside the study directory and the installed package: a recorded path that
-leads out of `inputs/`, or through a symbolic link out of the study directory, is not followed,
-and a task file the package does not ship is not read; either is left out. Nothing identifying
-enters the package: every text file is read before it is copied. An absolute path in it is
-rewritten to the package's copy of the file or folder it names (the manifest, or the task file's
-place in the installed package, says where each copy came from), or, naming nothing the package
-holds, replaced by `PATH_LEFT_OUT`; an episode id's participant number becomes its pseudonym. A
-file that names the account that runs the export or its machine, a live participant's label or
-token digest, a participant the package has no code for, or holds a token-shaped string is left
-out. The README lists each file with its role, each file rewritten and each left out with the
-reason.
+leads out of `inputs/`, or a symbolic link there leading out of it (even to another file of the
+study directory, such as its export key), is not followed, and a task file the package does not ship
+is not read; either is left out. Nothing identifying enters the package: every text file is read
+before it is copied. An absolute path in it is rewritten to the package's copy of the file or folder
+it names (the manifest, or the task file's place in the installed package, says where each copy came
+from), or, naming nothing the package holds, replaced by `PATH_LEFT_OUT`; an episode id's
+participant number becomes its pseudonym. A file that, its paths rewritten, still names the account
+that runs the export or its machine, a live participant's label or token digest, a participant the
+package has no code for, or holds a token-shaped string is left out. The README lists each file with
+its role, each file rewritten and each left out with the reason.
 """
 
 from __future__ import annotations
@@ -153,7 +153,10 @@ def identifying_names(registry: list[tuple[str, str]]) -> list[tuple[str, str]]:
 
 def cleaned(text: str, mapped: dict[str, str], names: list[tuple[str, str]], key: dict[int, int]
             ) -> tuple[str, str | None, str | None]:
-    """(the text as the package holds it, what was rewritten or None, why it is left out or None)."""
+    """(the text as the package holds it, what was rewritten or None, why it is left out or None).
+    Its absolute paths are rewritten before it is read for names: a path under the account's home
+    folder is rewritten as any other, and what the package would hold is what is read."""
+    text, relative, gone = rewritten_paths(text, mapped)
     for name, what in names:
         if re.search(rf"(?<![\w-]){re.escape(name)}(?![\w-])", text):
             return text, None, f"it holds {what}"
@@ -162,7 +165,6 @@ def cleaned(text: str, mapped: dict[str, str], names: list[tuple[str, str]], key
     unknown = sorted({int(n) for n in EPISODE_NUMBER.findall(text)} - set(key))
     if unknown:
         return text, None, "it names a participant (an episode id) with no data in the package"
-    text, relative, gone = rewritten_paths(text, mapped)
     text, ids = EPISODE_NUMBER.subn(lambda m: f"p{key[int(m.group(1))]:05d}-", text)
     said = [f"{counted(relative, 'absolute path')} made the package's relative paths of the copies "
             "they name"] * bool(relative) + [
@@ -172,13 +174,14 @@ def cleaned(text: str, mapped: dict[str, str], names: list[tuple[str, str]], key
 
 
 def within(study_dir: Path, relative: str) -> Path | None:
-    """The stored input `relative` when it lies in the study's inputs/ without a symbolic link
-    leading out of the study directory; None otherwise (it is not followed)."""
-    root = Path(study_dir).resolve()
+    """The stored input `relative` when it lies in the study's inputs/, as written and as a
+    symbolic link leads (to another file of the study, such as its export key, as much as out of
+    it); None otherwise (it is not followed)."""
+    inputs = Path(study_dir).resolve() / INPUTS_DIR
     path = Path(study_dir) / relative
-    if not Path(os.path.normpath(root / relative)).is_relative_to(root / INPUTS_DIR):
+    if not Path(os.path.normpath(inputs.parent / relative)).is_relative_to(inputs):
         return None
-    return path if path.resolve().is_relative_to(root) and path.is_file() else None
+    return path if path.resolve().is_relative_to(inputs) and path.is_file() else None
 
 
 def shipped_task(config: dict, packaged: PackagedInputs) -> dict[str, Path]:
@@ -227,7 +230,7 @@ def export_inputs(study_dir: Path, manifest: dict, out: Path, key: dict[int, int
         path = sources[relative]
         if path is None:
             packaged.left_out[relative] = ("it is not a file of the study's inputs/ (a path or a symbolic "
-                                           "link leading out of the study directory is not followed)")
+                                           "link leading out of inputs/ is not followed)")
             continue
         data = path.read_bytes()
         text = file_text(relative, data)

@@ -250,7 +250,7 @@ driver_model = "driver.json"
     assert f"beside {config['specs'][0]}" in model_copy and PATH_LEFT_OUT in model_copy
     for left_out, why in ((config["specs"][0], "a string of the form of a participant's token"),
                           (config["source_path"], "the user name of the account that runs the export"),
-                          (config["town"], "a symbolic link leading out of the study directory")):
+                          (config["town"], "a symbolic link leading out of inputs/")):
         assert not (package / left_out).exists()
         assert re.search(rf"`{left_out}`: left out, since [^\n]*{why}", readme), left_out
     assert (package / config["specs"][1]).is_file()
