@@ -126,15 +126,17 @@ def path_map(record: dict[str, dict[str, str]]) -> dict[str, str]:
 
 def rewritten_paths(text: str, mapped: dict[str, str]) -> tuple[str, int, int]:
     """`text` with every absolute path made the package's relative path of the file or folder it
-    names (`path_map`), or `PATH_LEFT_OUT`; (text, paths made relative, paths left out)."""
+    names (`path_map`), or `PATH_LEFT_OUT`; (text, paths made relative, paths left out). A path
+    inside a copied folder naming no copy is left out too: rewritten into that folder it would name
+    nothing the package holds, and carry the names of the lab's files."""
     counts = [0, 0]
 
     def relative(match: re.Match) -> str:
         path = match.group(0)
-        for source in sorted(mapped, key=len, reverse=True):
-            if path == source or path.startswith(source.rstrip("/") + "/"):
-                counts[0] += 1
-                return mapped[source] + path[len(source.rstrip("/")):]
+        named = path.rstrip("/") or path
+        if named in mapped:
+            counts[0] += 1
+            return mapped[named] + path[len(named):]
         counts[1] += 1
         return PATH_LEFT_OUT
 
