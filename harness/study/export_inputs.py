@@ -14,13 +14,15 @@ Nothing is read from outside the study directory and the installed package: a re
 leads out of `inputs/`, or a symbolic link there leading out of it (even to another file of the
 study directory, such as its export key), is not followed, and a task file the package does not ship
 is not read; either is left out. Nothing identifying enters the package: every text file is read
-before it is copied. An absolute path in it is rewritten to the package's copy of the file or folder
-it names (the manifest, or the task file's place in the installed package, says where each copy came
-from), or, naming nothing the package holds, replaced by `PATH_LEFT_OUT`; an episode id's
-participant number becomes its pseudonym. A file that, its paths rewritten, still names the account
-that runs the export or its machine, a live participant's label or token digest, a participant the
-package has no code for, or holds a token-shaped string is left out. The README lists each file with
-its role, each file rewritten and each left out with the reason.
+before it is copied (one that is not UTF-8, which the export cannot read, is left out; a policy's
+decision table, the one binary input, is copied as it is). An absolute path in it is rewritten to
+the package's copy of the file or folder it names (the manifest, or the task file's place in the
+installed package, says where each copy came from), or, naming nothing the package holds, replaced
+by `PATH_LEFT_OUT`; an episode id's participant number becomes its pseudonym. A file that, its paths
+rewritten, still names the account that runs the export or its machine, a live participant's label
+or token digest, a participant the package has no code for, or holds a token-shaped string is left
+out. The README lists each file with its role, each file rewritten and each left out with the
+reason.
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ from trustroute.harness.live.auth import TOKEN_BYTES
 from trustroute.harness.study.inputs import INPUTS_DIR, POLICIES_DIR, Record, content_folder, task_files
 from trustroute.networks.town import TOWNS
 from trustroute.participants.driver_model import DRIVER_MODELS
+from trustroute.policies.routing.files import ZIP_MAGIC
 
 # what an absolute path naming nothing the package holds becomes in a copied file
 PATH_LEFT_OUT = "<a path on the lab's disk, left out>"
@@ -102,7 +105,7 @@ def input_roles(config: dict, recorded: list[str]) -> dict[str, str]:
     for path in recorded:
         if path in roles:
             continue
-        if path.endswith(".npz"):
+        if is_decision_table(path):
             roles[path] = "decision table of the policy file beside it"
         elif path.startswith(f"{POLICIES_DIR}/"):
             roles[path] = "policy the study took from the policy cache (an aware or robust condition)"
@@ -208,6 +211,11 @@ def shipped_task(config: dict, packaged: PackagedInputs) -> dict[str, Path]:
     return sources
 
 
+def is_decision_table(relative: str) -> bool:
+    """Whether a recorded input is a policy file's decision table (policies/routing/files.py)."""
+    return relative.endswith(".npz")
+
+
 def file_text(relative: str, data: bytes) -> str | None:
     """A copied file's text (a gzipped one's, decompressed), None for a binary file."""
     try:
@@ -237,7 +245,11 @@ def export_inputs(study_dir: Path, manifest: dict, out: Path, key: dict[int, int
         data = path.read_bytes()
         text = file_text(relative, data)
         why = None
-        if text is not None:
+        if text is None and not (is_decision_table(relative) and data.startswith(ZIP_MAGIC)):
+            # a text file in another encoding is read no better than a binary one: not copied unread
+            why = ("it is not UTF-8 text (nor a policy's decision table), so it cannot be read for "
+                   "anything identifying")
+        elif text is not None:
             kept, said, why = cleaned(text, mapped, names, key)
             if said is not None and relative.endswith(".gz"):
                 why = f"{said}, which a gzipped file is not rewritten for"

@@ -48,3 +48,26 @@ def test_a_path_inside_a_copied_folder_naming_no_copy_is_left_out_not_rewritten_
     assert rewritten_paths(text, mapped) == (
         "cache inputs/policies and inputs/policies/, policy inputs/policies/aware-1.json, "
         f"notes {PATH_LEFT_OUT}", 3, 1)
+
+
+def test_a_text_input_not_in_utf8_is_left_out_not_copied_unread(tmp_path):
+    """A background-routes file in Latin-1 (SUMO reads the encoding its XML declares) cannot be read
+    as the export reads text: it is left out, with why, rather than copied with the lab's paths in
+    it; a decision table (a zip archive) is still copied as the binary it is."""
+    from trustroute.harness.study.export_inputs import export_inputs
+
+    study, out = tmp_path / "study", tmp_path / "package"
+    routes = ('<?xml version="1.0" encoding="ISO-8859-1"?>\n<!-- net /home/alice/lab/town.net.xml, '
+              'Stra\xdfe -->\n<routes/>\n').encode("latin-1")
+    files = {"inputs/0123456789abcdef/bg.rou.xml": routes,
+             "inputs/policies/aware-1.npz": b"PK\x03\x04" + bytes(range(256))}
+    for relative, data in files.items():
+        (study / relative).parent.mkdir(parents=True, exist_ok=True)
+        (study / relative).write_bytes(data)
+    manifest = {"config": {"routes": ["inputs/0123456789abcdef/bg.rou.xml"]},
+                "inputs": {"files": {relative: {"sha256": "0" * 64, "source": f"/home/alice/lab/{i}"}
+                                     for i, relative in enumerate(files)}}}
+    packaged = export_inputs(study, manifest, out, {}, [])
+    assert not (out / "inputs/0123456789abcdef/bg.rou.xml").exists()
+    assert "UTF-8" in packaged.left_out["inputs/0123456789abcdef/bg.rou.xml"]
+    assert (out / "inputs/policies/aware-1.npz").read_bytes() == files["inputs/policies/aware-1.npz"]
