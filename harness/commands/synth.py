@@ -227,7 +227,7 @@ def _synth_population(problem, objective: str, settings, out_path: str | None, a
                          {"policy": path, "policy_arrays": policy_arrays(path)})
     lines = population_lines(spec.name, population.n_types, objective, found,
                              summary["bayes"]["worst_type_value"])
-    lines += stop_notes(result, tau)
+    lines += stop_notes(result, tau, found.gap)
     lines.append(f"policy written to {path}")
     emit(as_json, payload, lines)
 

@@ -91,3 +91,16 @@ def test_the_policy_tables_prior_is_not_the_avs_belief():
     found.prior = (0.4, 0.3, 0.3)
     text = "\n".join(population_lines("phi", 3, "robust", found, worst_bayes=0.3))
     assert "policy table built for the population's weights 0.4, 0.3, 0.3, with which the AV filters" in text
+
+
+def test_a_run_the_wall_clock_cut_after_its_gap_reached_tau_does_not_say_before_it():
+    """`stopped_by` names the time limit whenever a run under a work limit reached the wall clock,
+    converged or not (policies/work_clock.py): the text then says the gap reached tau, not that the
+    limit came first."""
+    from trustroute.app.synthesis import stop_line
+
+    assert stop_line("time limit", 1e-3, 2e-3) == "stopped by: time limit, before the gap reached tau = 0.001"
+    cut_late = stop_line("time limit", 1e-3, 5e-4)
+    assert "before the gap reached tau" not in cut_late, cut_late
+    assert cut_late.startswith("stopped by: time limit (the gap reached tau = 0.001") and "load" in cut_late
+    assert stop_line("convergence", 1e-3, 5e-4) == "stopped by: convergence (the gap reached tau = 0.001)"

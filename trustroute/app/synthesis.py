@@ -223,19 +223,25 @@ def policy_arrays(path: str | Path) -> Path:
     return array_path(path)
 
 
-def stop_line(stopped_by: str, tau: float) -> str:
+def stop_line(stopped_by: str, tau: float, gap: float) -> str:
     """Why the run ended, in the word `--json` gives as "stopped_by" (policies/work_clock.py,
-    `stopped_by`): the gap reached tau, or a limit or cap came first."""
+    `stopped_by`): the gap reached tau, or a limit or cap came first. The time limit is named
+    whenever a run under a work limit reached the wall clock, even where its `gap` reached tau."""
     if stopped_by == "convergence":
         return f"stopped by: convergence (the gap reached tau = {tau:g})"
+    if stopped_by == "time limit" and gap <= tau:
+        return (f"stopped by: {stopped_by} (the gap reached tau = {tau:g}, but the wall clock passed the "
+                "time limit first, so where the run stopped depends on the machine's load)")
     return f"stopped by: {stopped_by}, before the gap reached tau = {tau:g}"
 
 
-def stop_notes(result: SynthesisResult, tau: float) -> list[str]:
-    """What a reader should know of how the run ended: why (`stop_line`); then a search stopped at
-    its node budget, which more time would not have moved; bounds that are the cluster policies' at
-    their largest cap, or those a trust-state synthesis' own cap left (`joint_cap_note`)."""
-    said = [] if result.stopped_by is None else [stop_line(result.stopped_by, tau)]
+def stop_notes(result: SynthesisResult, tau: float, gap: float | None = None) -> list[str]:
+    """What a reader should know of how the run ended: why (`stop_line`; `gap`: the one printed,
+    `result`'s unless given); then a search stopped at its node budget, which more time would not
+    have moved; bounds that are the cluster policies' at their largest cap, or those a trust-state
+    synthesis' own cap left (`joint_cap_note`)."""
+    gap = result.gap if gap is None else gap
+    said = [] if result.stopped_by is None else [stop_line(result.stopped_by, tau, gap)]
     return said + _stop_explained(result)
 
 
