@@ -108,8 +108,18 @@ def work_clock(work_limit: int | None, time_limit: float) -> Iterator[float]:
 # an unbounded evaluation (UNBOUNDED_MAX_LEVELS, policies/evaluation/trust_state.py); the fixed
 # depths of the trust-state synthesis' unbounded searches and policy horizons; its allowance for
 # rounding when every search is exact and tau is below it (policies/trust_state_synthesis/
-# synthesis.py, JOINT_STOPS).
-CAPS = ("cluster cap", "node cap", "junction cap", "depth cap", "rounding margin")
+# synthesis.py, JOINT_STOPS); the robust population objective's grid of candidate priors, every one
+# run and no run cut by a limit ("candidate grid", policies/synthesis/population.py: a grid search,
+# not an optimisation over all policies, so its gap is the grid's own).
+CAPS = ("cluster cap", "node cap", "junction cap", "depth cap", "rounding margin", "candidate grid")
+# The limits that can end a synthesis (`stopped_by`): more work or more time could move its bounds.
+LIMITS = ("work limit", "time limit")
+
+
+def limit_reached(clock: WorkClock | None) -> str:
+    """The limit a deadline on `clock` stands for (one of LIMITS): the work limit while the clock
+    counts work, the time limit without a work limit or once the wall clock has passed it."""
+    return "work limit" if clock is not None and not clock.timed_out else "time limit"
 
 
 def stopped_by(converged: bool, clock: WorkClock | None, node_budget: bool = False,
@@ -119,7 +129,8 @@ def stopped_by(converged: bool, clock: WorkClock | None, node_budget: bool = Fal
     read LATE: a run, a search or an evaluation may have been cut where the work limit would not
     have, so its result depends on the machine); else "convergence" (the gap reached tau), "node
     budget" (its search stopped at its node budget, `node_budget`, before any limit), `cap` (one of
-    CAPS: its bounds are those its own cap left), "work limit" (its work limit) or "time limit"."""
+    CAPS: its bounds are those its own cap left) or the limit its deadlines stood for
+    (`limit_reached`: "work limit" or "time limit")."""
     if cap is not None and cap not in CAPS:
         raise ValueError(f"unknown cap {cap!r}: one of {CAPS}")
     if clock is not None and clock.timed_out:
@@ -130,4 +141,4 @@ def stopped_by(converged: bool, clock: WorkClock | None, node_budget: bool = Fal
         return "node budget"
     if cap is not None:
         return cap
-    return "work limit" if clock is not None else "time limit"
+    return limit_reached(clock)

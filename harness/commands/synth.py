@@ -201,7 +201,13 @@ def _synth_population(problem, objective: str, settings, out_path: str | None, a
     """`synth --population`: the Bayes or robust objective over a population's driver types; past
     2 s (policies/resolve.py's PROGRESS_AFTER), a line per finished synthesis run with its bounds
     on stderr."""
-    from trustroute.app.synthesis import policy_arrays, population_summary, stop_notes, synthesize_population
+    from trustroute.app.synthesis import (
+        policy_arrays,
+        population_summary,
+        reached_tau,
+        stop_notes,
+        synthesize_population,
+    )
 
     town, population, spec = problem.town, problem.population, problem.given_spec
     tau, horizon, time_limit = settings.tau, settings.horizon, settings.time_limit
@@ -227,7 +233,7 @@ def _synth_population(problem, objective: str, settings, out_path: str | None, a
                          {"policy": path, "policy_arrays": policy_arrays(path)})
     lines = population_lines(spec.name, population.n_types, objective, found,
                              summary["bayes"]["worst_type_value"])
-    lines += stop_notes(result, tau, found.gap)
+    lines += stop_notes(result, tau, reached_tau(found, tau))
     lines.append(f"policy written to {path}")
     emit(as_json, payload, lines)
 

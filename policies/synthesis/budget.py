@@ -17,6 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 from trustroute.core.wording import interval
+from trustroute.policies.work_clock import installed, limit_reached
 from trustroute.policies.work_clock import now as clock_now
 
 MIN_RUN_SECONDS = 0.05  # a run's share never below this: a search needs a first expansion
@@ -97,6 +98,7 @@ class RunSchedule:
     gaps: int = 0
     not_needed: int = 0   # candidate priors left out once the best was within tau of the bound
     skipped: int = 0      # candidate priors left out for want of time
+    cut: int = 0          # runs that ended at their limit unconverged (`finished`)
 
     def _close_gap(self) -> None:
         """Count the work since the last run ended (its evaluations) as one gap between runs."""
@@ -136,11 +138,13 @@ class RunSchedule:
         return self.budget.fits(self.per_gap + seconds + MIN_RUN_SECONDS * later_runs)
 
     def skip(self, what: str) -> None:
-        """A run left out for want of time (a candidate prior)."""
+        """A run left out for want of time (a candidate prior): the stderr line names the limit
+        that leaves it none (work_clock.limit_reached)."""
         self.runs -= 1
         self.skipped += 1
         if self.on_phase is not None:
-            self.on_phase(f"[{self.budget.elapsed():.1f} s] {what}: skipped, the time limit is reached")
+            self.on_phase(f"[{self.budget.elapsed():.1f} s] {what}: skipped, too little of the "
+                          f"{limit_reached(installed())} is left for its run")
 
     def settle(self, left_out: int) -> None:
         """The last `left_out` candidate priors left out: the best candidate so far is within tau
@@ -157,8 +161,11 @@ class RunSchedule:
         LATER_RUN_FACTOR times its share for its fixed costs."""
         return self.budget.deadline - LATER_RUN_FACTOR * MIN_RUN_SECONDS * later_runs
 
-    def finished(self, what: str, lower: float, upper: float) -> None:
+    def finished(self, what: str, lower: float, upper: float, cut: bool) -> None:
+        """A run ended with bounds [lower, upper]; `cut`: at its limit, unconverged (neither its
+        node budget nor a cap of its own ended it), so a longer limit could have moved them."""
         self.done += 1
+        self.cut += cut
         self.last_end = clock_now()
         if self.on_phase is not None:
             self.on_phase(f"[{self.done}/{self.runs}, {self.budget.elapsed():.1f} s] {what}: "

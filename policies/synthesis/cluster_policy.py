@@ -53,8 +53,8 @@ from trustroute.policies.synthesis.completion_value import (
 )
 from trustroute.policies.synthesis.result import ClusterAttempt, ClusterRun, SynthesisStats
 from trustroute.policies.synthesis.upper_bound import acceptance_distance
+from trustroute.policies.work_clock import CAPS, spend
 from trustroute.policies.work_clock import now as clock_now
-from trustroute.policies.work_clock import spend
 
 VALUE_MARGIN = 1e-12              # every level's lower values are lowered, upper raised, by this
 CLUSTER_CAPS = (16, 64, 256, 512)  # clusters per (t, x, q), tried in turn while the gap exceeds tau
@@ -365,3 +365,14 @@ def reached_cluster_cap(stats: object, lower: float, upper: float) -> bool:
     last = stats.runs[-1]
     return (isinstance(last, ClusterRun) and last.cluster_cap == CLUSTER_CAPS[-1]
             and (last.lower, last.upper) == (lower, upper))
+
+
+def belief_cap(stats: object, lower: float, upper: float) -> str | None:
+    """The cap of a belief-MDP synthesis' own (work_clock.CAPS) whose bounds (`lower`, `upper`) it
+    returned, if any: its cluster policies' largest (`reached_cluster_cap`), or the end of an
+    unbounded schedule run whole (SynthesisStats.stopped, belief_synthesis.py)."""
+    if reached_cluster_cap(stats, lower, upper):
+        return "cluster cap"
+    if isinstance(stats, SynthesisStats) and stats.stopped in CAPS:
+        return stats.stopped
+    return None

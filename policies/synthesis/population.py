@@ -62,6 +62,8 @@ from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.synthesis.belief_synthesis import BeliefSynthesis, synthesize
 from trustroute.policies.synthesis.budget import MIN_RUN_SECONDS, RunSchedule, TimeBudget
+from trustroute.policies.synthesis.cluster_policy import belief_cap
+from trustroute.policies.synthesis.refinement import reached_node_budget
 from trustroute.policies.synthesis.result import RoundProgress, SearchRun, SynthesisResult, SynthesisStats
 from trustroute.policies.synthesis.result import robust_progress as told_robust
 from trustroute.policies.synthesis.rounding import (
@@ -72,6 +74,7 @@ from trustroute.policies.synthesis.rounding import (
     rounded_up,
 )
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
+from trustroute.policies.work_clock import LIMITS, stopped_by
 from trustroute.policies.work_clock import now as clock_now
 
 Objective = Literal["bayes", "robust"]
@@ -161,6 +164,7 @@ class PopulationSynthesis:
     bayes_policy: RoutingPolicy | None = None   # the Bayes synthesis' policy (robust objective)
     candidates_not_needed: int = 0    # candidate priors not run: the best was within tau of `upper`
     candidates_skipped: int = 0       # candidate priors not run for want of time
+    runs_cut: int = 0                 # runs (robust objective) that ended at their limit unconverged
 
     @property
     def gap(self) -> float:
@@ -284,6 +288,15 @@ def within_tau(values: Iterable[TypeValue], bound: float, tau: float) -> bool:
     return worst_type(values) >= bound - tau
 
 
+def cut_by_its_limit(run: SynthesisResult, cap: str | None = None) -> bool:
+    """Whether a run of the schedule ended at its limit, where work_clock.stopped_by names one of
+    LIMITS: unconverged, before its node budget, before `cap` (a trust-state synthesis' own,
+    trust_state_synthesis.synthesis.reached_joint_cap) and a belief-MDP synthesis' own cap
+    (`belief_cap`); so a longer limit could have moved its bounds."""
+    own = cap if cap is not None else belief_cap(run.stats, run.lower, run.upper)
+    return stopped_by(run.stats.converged, None, reached_node_budget(run.stats), own) in LIMITS
+
+
 def setup_seconds(result: BeliefSynthesis) -> float:
     """A synthesis run's fixed costs before its search could expand (the exact filter, the product,
     the abstraction), as its search runs report them on the synthesis' clock: under a work limit
@@ -303,7 +316,8 @@ def type_bounds(town: Town, population: DriverPopulation, spec: Spec, settings: 
         own = synthesize(build_pomdp(town, t.model), own_spec,
                          replace(settings, time_limit=schedule.capped_limit(TYPE_BOUND_SHARE),
                                  belief_rule="bayes"))
-        schedule.finished(f"bound of type {t.name}'s own optimum", own.lower, own.upper)
+        schedule.finished(f"bound of type {t.name}'s own optimum", own.lower, own.upper,
+                          cut=cut_by_its_limit(own))
         bounds.append(own.upper)
     return tuple(bounds)
 
@@ -387,7 +401,7 @@ def robust_candidates(town: Town, population: DriverPopulation, spec: Spec, sett
         made = synthesize(build_pomdp(town, lift_population(population, prior)), spec,
                           replace(settings, time_limit=schedule.next_limit(at_least=setup)),
                           on_iteration=candidate_progress)
-        schedule.finished(candidate_name(prior), made.lower, made.upper)
+        schedule.finished(candidate_name(prior), made.lower, made.upper, cut=cut_by_its_limit(made))
         policy = BeliefTablePolicy(made.policy.table, town, spec, name="robust",
                                    horizon=horizon, reweight=reweighting(population, prior))
         found = candidate_values(pomdp, spec, policy, population, evaluation,
@@ -432,7 +446,8 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
         limit = schedule.capped_limit(1.0 - (EVALUATION_SHARE if population.n_types > 1 else 0.0))
     told = told_robust(on_iteration, lambda: None, min(type_upper), True) if type_upper else on_iteration
     bayes = synthesize(pomdp, lifted_spec, replace(settings, time_limit=limit), on_iteration=told)
-    schedule.finished("Bayes objective, the population's weights", bayes.lower, bayes.upper)
+    schedule.finished("Bayes objective, the population's weights", bayes.lower, bayes.upper,
+                      cut=cut_by_its_limit(bayes))
     bayes_values = per_type_values(pomdp, lifted_spec, bayes.policy, population, cap, belief_rule,
                                    deadline=schedule.evaluation_deadline(0))
     weights = population.weights
@@ -466,7 +481,7 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
         upper=upper, seconds=seconds, bayes_lower=bayes.lower, bayes_upper=bayes.upper,
         bayes_type_values=bayes_values, candidates=candidates, type_upper=tuple(type_upper),
         bayes_policy=bayes.policy, candidates_not_needed=schedule.not_needed,
-        candidates_skipped=schedule.skipped)
+        candidates_skipped=schedule.skipped, runs_cut=schedule.cut)
 
 
 def policy_name(synthesis: PopulationSynthesis) -> str:
@@ -514,4 +529,5 @@ def summary(synthesis: PopulationSynthesis) -> dict:
         out["candidates"] = synthesis.candidates
         out["candidates_not_needed"] = synthesis.candidates_not_needed
         out["candidates_skipped"] = synthesis.candidates_skipped
+        out["runs_cut"] = synthesis.runs_cut
     return out

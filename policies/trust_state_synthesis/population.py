@@ -56,6 +56,7 @@ from trustroute.policies.synthesis.population import (
     TypeValue,
     candidate_name,
     candidate_priors,
+    cut_by_its_limit,
     evaluation_cap,
     mixture_lower,
     reweighting,
@@ -69,6 +70,7 @@ from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisS
 from trustroute.policies.trust_state_synthesis.synthesis import (
     EVALUATION_NODES,
     JointSynthesis,
+    reached_joint_cap,
     synthesize_joint,
 )
 from trustroute.policies.work_clock import now as clock_now
@@ -135,7 +137,8 @@ def type_optimum_bounds(problem: Problem, settings: SynthesisSettings, schedule:
         own = synthesize(build_pomdp(problem.town, t.model), own_spec,
                          replace(settings, time_limit=schedule.capped_limit(TYPE_BOUND_SHARE),
                                  belief_rule="bayes"))
-        schedule.finished(f"bound of type {t.name}'s own optimum", own.lower, own.upper)
+        schedule.finished(f"bound of type {t.name}'s own optimum", own.lower, own.upper,
+                          cut=cut_by_its_limit(own, reached_joint_cap(own.stats)))
         bounds.append(own.upper)
     return tuple(bounds)
 
@@ -175,7 +178,8 @@ def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[Typ
         made = synthesize_joint(model, problem.spec,
                                 replace(settings, time_limit=schedule.next_limit()),
                                 on_iteration=candidate_progress)
-        schedule.finished(candidate_name(prior), made.lower, made.upper)
+        schedule.finished(candidate_name(prior), made.lower, made.upper,
+                          cut=cut_by_its_limit(made, reached_joint_cap(made.stats)))
         policy = JointTablePolicy(made.policy.table, problem.pomdp, problem.spec, made.policy.guide_horizon,
                                   name="robust", certificate=Certificate(horizon=horizon),
                                   guide=made.policy.guide, reweight=reweighting(population, prior))
@@ -218,7 +222,8 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
     told = robust_progress(on_iteration, lambda: None, min(type_upper), True) if robust else on_iteration
     bayes = synthesize_joint(problem.pomdp, problem.spec, replace(settings, time_limit=limit),
                              on_iteration=told)
-    schedule.finished("Bayes objective, the population's weights", bayes.lower, bayes.upper)
+    schedule.finished("Bayes objective, the population's weights", bayes.lower, bayes.upper,
+                      cut=cut_by_its_limit(bayes, reached_joint_cap(bayes.stats)))
     values = joint_type_values(problem, bayes.policy, evaluation_cap(horizon), belief_rule,
                                deadline=schedule.budget.deadline)
     found = PopulationSynthesis(
@@ -243,4 +248,4 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
                    type_values=best_values, lower=lower, upper=max(upper, lower),
                    seconds=time.perf_counter() - started, candidates=candidates, type_upper=type_upper,
                    bayes_policy=bayes.policy, candidates_not_needed=schedule.not_needed,
-                   candidates_skipped=schedule.skipped)
+                   candidates_skipped=schedule.skipped, runs_cut=schedule.cut)

@@ -26,7 +26,7 @@ from trustroute.policies.routing.files import array_path, save_policy
 from trustroute.policies.routing.free import baseline_route, trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.synthesis.belief_synthesis import unbounded_schedule_note
-from trustroute.policies.synthesis.cluster_policy import CLUSTER_CAPS, reached_cluster_cap
+from trustroute.policies.synthesis.cluster_policy import CLUSTER_CAPS, belief_cap
 from trustroute.policies.synthesis.population import (
     Objective,
     PopulationSynthesis,
@@ -44,7 +44,7 @@ from trustroute.policies.synthesis.settings import SynthesisSettings as SearchSe
 from trustroute.policies.synthesize_spec import synthesize_for_population, synthesize_problem
 from trustroute.policies.trust_state_synthesis.population import certified_type_values
 from trustroute.policies.trust_state_synthesis.synthesis import joint_cap_note, reached_joint_cap
-from trustroute.policies.work_clock import CAPS, installed, stopped_by, work_clock
+from trustroute.policies.work_clock import CAPS, WorkClock, installed, stopped_by, work_clock
 
 
 def belief_rule_named(name: str) -> BeliefRule:
@@ -82,12 +82,8 @@ class SynthesisSettings(SearchSettings):
 def reached_cap(stats: object, lower: float, upper: float) -> str | None:
     """The cap of a synthesis' own (work_clock.CAPS) whose bounds it returned (`lower`, `upper`),
     if any: a trust-state synthesis says which (`reached_joint_cap`), a belief-MDP synthesis ends
-    at its cluster policies' largest cap (`reached_cluster_cap`)."""
-    if reached_cluster_cap(stats, lower, upper):
-        return "cluster cap"
-    if isinstance(stats, SynthesisStats) and stats.stopped in CAPS:
-        return stats.stopped            # an unbounded schedule run to its end (belief_synthesis.py)
-    return reached_joint_cap(stats)
+    at its cluster policies' largest cap or at its unbounded schedule's end (`belief_cap`)."""
+    return belief_cap(stats, lower, upper) or reached_joint_cap(stats)
 
 
 def synthesize_single(problem: Problem, settings: SynthesisSettings,
@@ -141,19 +137,32 @@ def synthesize_population(problem: Problem, objective: str, settings: SynthesisS
                                           population_source=population.source_path,
                                           on_iteration=on_iteration,
                                           on_phase=phase_lines("synth", settings.progress))
-    # the Bayes objective's bounds are its one search's, converged on the values it computed
-    # (the reported ones are rounded outward, policies/synthesis/rounding.py); the robust one's
-    # candidates run on until the time limit, whatever stopped one of their searches
-    bayes = objective == "bayes"
-    converged = found.result.stats.converged if bayes else found.gap <= settings.tau
-    ended = stopped_by(converged, clock, bayes and reached_node_budget(found.result.stats),
-                       reached_cap(found.result.stats, found.result.lower, found.result.upper)
-                       if bayes else None)
+    ended = population_stop(found, clock, settings.tau)
     found = replace(found, result=replace(found.result, stopped_by=ended))
     if out is not None:
         save_policy(found.result, out, problem.town, found.pomdp.driver, found.spec,
                     population=document_entries(found), name=policy_name(found))
     return found
+
+
+def reached_tau(found: PopulationSynthesis, tau: float) -> bool:
+    """Whether a population synthesis converged: the Bayes objective's bounds are its one search's,
+    converged on the values it computed (the reported ones are rounded outward,
+    policies/synthesis/rounding.py); the robust objective's gap is its certified one."""
+    return found.result.stats.converged if found.objective == "bayes" else found.gap <= tau
+
+
+def population_stop(found: PopulationSynthesis, clock: WorkClock | None, tau: float) -> str:
+    """What ended a population synthesis (work_clock.stopped_by): the Bayes objective's one search
+    says so; the robust objective's runs end for their own reasons, and above tau its gap is the
+    candidate grid's own when every candidate prior ran and no run was cut by its limit (more time
+    would not narrow it), else the limit that skipped or cut a run."""
+    stats, lower, upper = found.result.stats, found.result.lower, found.result.upper
+    if found.objective == "bayes":
+        return stopped_by(reached_tau(found, tau), clock, reached_node_budget(stats),
+                          reached_cap(stats, lower, upper))
+    whole = found.candidates_skipped == 0 and found.runs_cut == 0
+    return stopped_by(reached_tau(found, tau), clock, cap="candidate grid" if whole else None)
 
 
 def certified(problem: Problem, value: Evaluation) -> Evaluation:
@@ -223,30 +232,33 @@ def policy_arrays(path: str | Path) -> Path:
     return array_path(path)
 
 
-def stop_line(stopped_by: str, tau: float, gap: float) -> str:
+def stop_line(stopped_by: str, tau: float, converged: bool) -> str:
     """Why the run ended, in the word `--json` gives as "stopped_by" (policies/work_clock.py,
-    `stopped_by`): the gap reached tau, or a limit or cap came first. The time limit is named
-    whenever a run under a work limit reached the wall clock, even where its `gap` reached tau."""
+    `stopped_by`): the gap reached tau, or a limit or cap came first; or (`converged`, under a
+    work limit) the gap reached tau but the wall clock passed the time limit on the way."""
     if stopped_by == "convergence":
         return f"stopped by: convergence (the gap reached tau = {tau:g})"
-    if stopped_by == "time limit" and gap <= tau:
-        return (f"stopped by: {stopped_by} (the gap reached tau = {tau:g}, but the wall clock passed the "
-                "time limit first, so where the run stopped depends on the machine's load)")
+    if converged:
+        return (f"stopped by: {stopped_by}, though the gap reached tau = {tau:g}: the wall clock passed "
+                "the time limit under the work limit, so the result may depend on the machine's load")
     return f"stopped by: {stopped_by}, before the gap reached tau = {tau:g}"
 
 
-def stop_notes(result: SynthesisResult, tau: float, gap: float | None = None) -> list[str]:
-    """What a reader should know of how the run ended: why (`stop_line`; `gap`: the one printed,
-    `result`'s unless given); then a search stopped at its node budget, which more time would not
-    have moved; bounds that are the cluster policies' at their largest cap, or those a trust-state
-    synthesis' own cap left (`joint_cap_note`)."""
-    gap = result.gap if gap is None else gap
-    said = [] if result.stopped_by is None else [stop_line(result.stopped_by, tau, gap)]
+def stop_notes(result: SynthesisResult, tau: float, converged: bool) -> list[str]:
+    """What a reader should know of how the run ended: why (`stop_line`; `converged`: whether the
+    gap reached tau); then a search stopped at its node budget, which more time would not have
+    moved; bounds that are the cluster policies' at their largest cap, those a trust-state
+    synthesis' own cap left (`joint_cap_note`), or a robust objective's whole candidate grid."""
+    said = [] if result.stopped_by is None else [stop_line(result.stopped_by, tau, converged)]
     return said + _stop_explained(result)
 
 
 def _stop_explained(result: SynthesisResult) -> list[str]:
     """The note on a stop by a node budget or a cap of the method's own (none for the others)."""
+    if result.stopped_by == "candidate grid":
+        return ["every candidate prior of the grid ran and no run was cut by its limit: the gap is the "
+                "grid search's own (it compares the grid's priors, not all policies), and a longer "
+                "--time-limit would not narrow it"]
     if result.stopped_by == "cluster cap":
         return [f"the bounds are the cluster policies' at their largest cap ({CLUSTER_CAPS[-1]} clusters "
                 "per junction, road and automaton state), tighter than the search's before them: a longer "
@@ -265,7 +277,7 @@ def _stop_explained(result: SynthesisResult) -> list[str]:
 
 def bounds_notes(result: SynthesisResult, tau: float) -> list[str]:
     """What a reader of the bounds should know: how the run ended, a cluster policy."""
-    lines = stop_notes(result, tau)
+    lines = stop_notes(result, tau, result.stats.converged)
     table = result.policy.table if isinstance(result.policy, BeliefTablePolicy) else None
     boxes = table.boxes if table is not None else None
     if boxes is not None and boxes.rows:

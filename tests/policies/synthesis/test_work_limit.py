@@ -146,6 +146,52 @@ def test_a_robust_population_synthesis_the_wall_clock_cut_says_so(monkeypatch):
     assert cut.result.stopped_by == "time limit" and cut.candidates_skipped > 0
 
 
+@pytest.mark.parametrize(("work_limit", "named"), [(None, "time limit"), (10**6, "work limit")])
+def test_a_skipped_candidate_names_the_limit_that_leaves_it_no_room(work_limit, named):
+    """The stderr line of a candidate prior the schedule cannot afford names the limit whose clock
+    the schedule reads (work_clock.limit_reached)."""
+    from trustroute.policies.synthesis.budget import RunSchedule, TimeBudget
+    from trustroute.policies.work_clock import work_clock
+
+    heard: list[str] = []
+    with work_clock(work_limit, SLOW) as limit:
+        schedule = RunSchedule(TimeBudget.start(limit), runs=2, on_phase=heard.append)
+        schedule.skip("candidate prior [0.0, 1.0]")
+    assert heard[0].endswith(f"candidate prior [0.0, 1.0]: skipped, too little of the {named} is left "
+                             "for its run"), heard
+    assert schedule.skipped == 1
+
+
+@pytest.mark.parametrize(("skipped", "cut", "work_limit", "gap", "named"), [
+    (0, 0, None, 0.02, "candidate grid"),     # every candidate ran, none cut: the grid's own gap
+    (0, 0, None, 0.0, "convergence"),
+    (1, 0, None, 0.02, "time limit"),         # the clock skipped a candidate
+    (0, 1, None, 0.02, "time limit"),         # ... or cut a run short
+    (0, 1, 10**9, 0.02, "work limit"),        # the work limit did
+])
+def test_a_robust_synthesis_names_what_ended_it(skipped, cut, work_limit, gap, named):
+    """`population_stop`: a robust synthesis above tau names the limit only when its clock skipped a
+    candidate prior or cut a run (RunSchedule.cut, population.cut_by_its_limit)."""
+    from types import SimpleNamespace
+
+    from trustroute.app.synthesis import population_stop
+    from trustroute.policies.work_clock import installed, work_clock
+
+    found = SimpleNamespace(objective="robust", candidates_skipped=skipped, runs_cut=cut, gap=gap,
+                            result=SimpleNamespace(stats=None, lower=0.5, upper=0.5 + gap))
+    with work_clock(work_limit, SLOW):
+        assert population_stop(found, installed(), 1e-3) == named
+
+
+def test_a_run_cut_by_its_limit_is_told_from_one_a_cap_or_convergence_ended(converged):
+    from trustroute.policies.synthesis.population import cut_by_its_limit
+
+    assert not cut_by_its_limit(converged)
+    short = trustroute.synthesize("phi1", horizon=10, work_limit=2_000, time_limit=SLOW)
+    assert short.stopped_by == "work limit" and cut_by_its_limit(short)
+    assert not cut_by_its_limit(short, cap="node cap")
+
+
 def test_a_search_stopped_by_its_node_budget_says_so(capsys, tmp_path):
     """A search that stops at its node budget, long before its time limit, says so: `stopped_by` is
     "node budget" in the API and in --json (not "time limit": more time would not have moved its
