@@ -17,7 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 from trustroute.core.wording import interval
-from trustroute.policies.work_clock import installed, limit_reached
+from trustroute.policies.work_clock import LIMITS, installed, limit_reached
 from trustroute.policies.work_clock import now as clock_now
 
 MIN_RUN_SECONDS = 0.05  # a run's share never below this: a search needs a first expansion
@@ -99,6 +99,7 @@ class RunSchedule:
     not_needed: int = 0   # candidate priors left out once the best was within tau of the bound
     skipped: int = 0      # candidate priors left out for want of time
     cut: int = 0          # runs that ended at their limit unconverged (`finished`)
+    at_node_budget: int = 0   # runs whose search stopped at its node budget, before any limit
 
     def _close_gap(self) -> None:
         """Count the work since the last run ended (its evaluations) as one gap between runs."""
@@ -161,11 +162,13 @@ class RunSchedule:
         LATER_RUN_FACTOR times its share for its fixed costs."""
         return self.budget.deadline - LATER_RUN_FACTOR * MIN_RUN_SECONDS * later_runs
 
-    def finished(self, what: str, lower: float, upper: float, cut: bool) -> None:
-        """A run ended with bounds [lower, upper]; `cut`: at its limit, unconverged (neither its
-        node budget nor a cap of its own ended it), so a longer limit could have moved them."""
+    def finished(self, what: str, lower: float, upper: float, ended: str) -> None:
+        """A run ended with bounds [lower, upper], for the reason `ended` (work_clock.stopped_by's
+        word for it; one of LIMITS: at its limit, unconverged, so a longer limit could have moved
+        them)."""
         self.done += 1
-        self.cut += cut
+        self.cut += ended in LIMITS
+        self.at_node_budget += ended == "node budget"
         self.last_end = clock_now()
         if self.on_phase is not None:
             self.on_phase(f"[{self.done}/{self.runs}, {self.budget.elapsed():.1f} s] {what}: "

@@ -74,8 +74,8 @@ from trustroute.policies.synthesis.rounding import (
     rounded_up,
 )
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
-from trustroute.policies.work_clock import LIMITS, stopped_by
 from trustroute.policies.work_clock import now as clock_now
+from trustroute.policies.work_clock import stopped_by
 
 Objective = Literal["bayes", "robust"]
 OBJECTIVES: tuple[str, ...] = ("bayes", "robust")
@@ -165,6 +165,7 @@ class PopulationSynthesis:
     candidates_not_needed: int = 0    # candidate priors not run: the best was within tau of `upper`
     candidates_skipped: int = 0       # candidate priors not run for want of time
     runs_cut: int = 0                 # runs (robust objective) that ended at their limit unconverged
+    runs_at_node_budget: int = 0      # runs (robust objective) whose search stopped at its node budget
 
     @property
     def gap(self) -> float:
@@ -288,13 +289,13 @@ def within_tau(values: Iterable[TypeValue], bound: float, tau: float) -> bool:
     return worst_type(values) >= bound - tau
 
 
-def cut_by_its_limit(run: SynthesisResult, cap: str | None = None) -> bool:
-    """Whether a run of the schedule ended at its limit, where work_clock.stopped_by names one of
-    LIMITS: unconverged, before its node budget, before `cap` (a trust-state synthesis' own,
-    trust_state_synthesis.synthesis.reached_joint_cap) and a belief-MDP synthesis' own cap
-    (`belief_cap`); so a longer limit could have moved its bounds."""
+def run_end(run: SynthesisResult, cap: str | None = None) -> str:
+    """What ended a run of the schedule, in work_clock.stopped_by's words: "convergence", "node
+    budget", `cap` (a trust-state synthesis' own, trust_state_synthesis.synthesis.reached_joint_cap)
+    or a belief-MDP synthesis' own cap (`belief_cap`), else its limit (one of LIMITS: which one is
+    the call's to name, from its clock)."""
     own = cap if cap is not None else belief_cap(run.stats, run.lower, run.upper)
-    return stopped_by(run.stats.converged, None, reached_node_budget(run.stats), own) in LIMITS
+    return stopped_by(run.stats.converged, None, reached_node_budget(run.stats), own)
 
 
 def setup_seconds(result: BeliefSynthesis) -> float:
@@ -317,7 +318,7 @@ def type_bounds(town: Town, population: DriverPopulation, spec: Spec, settings: 
                          replace(settings, time_limit=schedule.capped_limit(TYPE_BOUND_SHARE),
                                  belief_rule="bayes"))
         schedule.finished(f"bound of type {t.name}'s own optimum", own.lower, own.upper,
-                          cut=cut_by_its_limit(own))
+                          ended=run_end(own))
         bounds.append(own.upper)
     return tuple(bounds)
 
@@ -401,7 +402,7 @@ def robust_candidates(town: Town, population: DriverPopulation, spec: Spec, sett
         made = synthesize(build_pomdp(town, lift_population(population, prior)), spec,
                           replace(settings, time_limit=schedule.next_limit(at_least=setup)),
                           on_iteration=candidate_progress)
-        schedule.finished(candidate_name(prior), made.lower, made.upper, cut=cut_by_its_limit(made))
+        schedule.finished(candidate_name(prior), made.lower, made.upper, ended=run_end(made))
         policy = BeliefTablePolicy(made.policy.table, town, spec, name="robust",
                                    horizon=horizon, reweight=reweighting(population, prior))
         found = candidate_values(pomdp, spec, policy, population, evaluation,
@@ -447,7 +448,7 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
     told = told_robust(on_iteration, lambda: None, min(type_upper), True) if type_upper else on_iteration
     bayes = synthesize(pomdp, lifted_spec, replace(settings, time_limit=limit), on_iteration=told)
     schedule.finished("Bayes objective, the population's weights", bayes.lower, bayes.upper,
-                      cut=cut_by_its_limit(bayes))
+                      ended=run_end(bayes))
     bayes_values = per_type_values(pomdp, lifted_spec, bayes.policy, population, cap, belief_rule,
                                    deadline=schedule.evaluation_deadline(0))
     weights = population.weights
@@ -481,7 +482,8 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
         upper=upper, seconds=seconds, bayes_lower=bayes.lower, bayes_upper=bayes.upper,
         bayes_type_values=bayes_values, candidates=candidates, type_upper=tuple(type_upper),
         bayes_policy=bayes.policy, candidates_not_needed=schedule.not_needed,
-        candidates_skipped=schedule.skipped, runs_cut=schedule.cut)
+        candidates_skipped=schedule.skipped, runs_cut=schedule.cut,
+        runs_at_node_budget=schedule.at_node_budget)
 
 
 def policy_name(synthesis: PopulationSynthesis) -> str:

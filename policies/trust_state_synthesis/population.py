@@ -56,11 +56,11 @@ from trustroute.policies.synthesis.population import (
     TypeValue,
     candidate_name,
     candidate_priors,
-    cut_by_its_limit,
     evaluation_cap,
     mixture_lower,
     reweighting,
     run_count,
+    run_end,
     within_tau,
     worst_type,
 )
@@ -138,7 +138,7 @@ def type_optimum_bounds(problem: Problem, settings: SynthesisSettings, schedule:
                          replace(settings, time_limit=schedule.capped_limit(TYPE_BOUND_SHARE),
                                  belief_rule="bayes"))
         schedule.finished(f"bound of type {t.name}'s own optimum", own.lower, own.upper,
-                          cut=cut_by_its_limit(own, reached_joint_cap(own.stats)))
+                          ended=run_end(own, reached_joint_cap(own.stats)))
         bounds.append(own.upper)
     return tuple(bounds)
 
@@ -179,7 +179,7 @@ def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[Typ
                                 replace(settings, time_limit=schedule.next_limit()),
                                 on_iteration=candidate_progress)
         schedule.finished(candidate_name(prior), made.lower, made.upper,
-                          cut=cut_by_its_limit(made, reached_joint_cap(made.stats)))
+                          ended=run_end(made, reached_joint_cap(made.stats)))
         policy = JointTablePolicy(made.policy.table, problem.pomdp, problem.spec, made.policy.guide_horizon,
                                   name="robust", certificate=Certificate(horizon=horizon),
                                   guide=made.policy.guide, reweight=reweighting(population, prior))
@@ -223,7 +223,7 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
     bayes = synthesize_joint(problem.pomdp, problem.spec, replace(settings, time_limit=limit),
                              on_iteration=told)
     schedule.finished("Bayes objective, the population's weights", bayes.lower, bayes.upper,
-                      cut=cut_by_its_limit(bayes, reached_joint_cap(bayes.stats)))
+                      ended=run_end(bayes, reached_joint_cap(bayes.stats)))
     values = joint_type_values(problem, bayes.policy, evaluation_cap(horizon), belief_rule,
                                deadline=schedule.budget.deadline)
     found = PopulationSynthesis(
@@ -248,4 +248,5 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
                    type_values=best_values, lower=lower, upper=max(upper, lower),
                    seconds=time.perf_counter() - started, candidates=candidates, type_upper=type_upper,
                    bayes_policy=bayes.policy, candidates_not_needed=schedule.not_needed,
-                   candidates_skipped=schedule.skipped, runs_cut=schedule.cut)
+                   candidates_skipped=schedule.skipped, runs_cut=schedule.cut,
+                   runs_at_node_budget=schedule.at_node_budget)

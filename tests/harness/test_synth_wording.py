@@ -42,10 +42,10 @@ def test_a_robust_run_of_the_whole_grid_names_the_grid_not_the_time_limit(capsys
                                   "--time-limit", "600")
     population = answer["population"]
     assert answer["gap"] > answer["tau"], answer
-    assert population["candidates_skipped"] == population["runs_cut"] == 0, population
-    assert population["candidates_not_needed"] == 0, population
     assert answer["stopped_by"] == "candidate grid", answer
     assert "stopped by: candidate grid, before the gap reached tau = 0.001\n" in text, text
+    assert population["candidates_skipped"] == population["runs_cut"] == 0, population
+    assert population["candidates_not_needed"] == 0, population
     assert "every candidate prior of the grid ran and no run was cut by its limit" in text, text
     assert "time limit" not in text, text
 

@@ -154,15 +154,16 @@ def reached_tau(found: PopulationSynthesis, tau: float) -> bool:
 
 def population_stop(found: PopulationSynthesis, clock: WorkClock | None, tau: float) -> str:
     """What ended a population synthesis (work_clock.stopped_by): the Bayes objective's one search
-    says so; the robust objective's runs end for their own reasons, and above tau its gap is the
-    candidate grid's own when every candidate prior ran and no run was cut by its limit (more time
-    would not narrow it), else the limit that skipped or cut a run."""
+    says so. The robust objective above tau names the limit that skipped a candidate prior or cut a
+    run short; else, every prior run and no run cut, the node budget if a run's search stopped at
+    it, or the candidate grid (its gap is the grid search's: more time would not narrow it)."""
     stats, lower, upper = found.result.stats, found.result.lower, found.result.upper
     if found.objective == "bayes":
         return stopped_by(reached_tau(found, tau), clock, reached_node_budget(stats),
                           reached_cap(stats, lower, upper))
     whole = found.candidates_skipped == 0 and found.runs_cut == 0
-    return stopped_by(reached_tau(found, tau), clock, cap="candidate grid" if whole else None)
+    return stopped_by(reached_tau(found, tau), clock, whole and found.runs_at_node_budget > 0,
+                      "candidate grid" if whole else None)
 
 
 def certified(problem: Problem, value: Evaluation) -> Evaluation:
@@ -256,9 +257,9 @@ def stop_notes(result: SynthesisResult, tau: float, converged: bool) -> list[str
 def _stop_explained(result: SynthesisResult) -> list[str]:
     """The note on a stop by a node budget or a cap of the method's own (none for the others)."""
     if result.stopped_by == "candidate grid":
-        return ["every candidate prior of the grid ran and no run was cut by its limit: the gap is the "
-                "grid search's own (it compares the grid's priors, not all policies), and a longer "
-                "--time-limit would not narrow it"]
+        return ["every candidate prior of the grid ran and no run was cut by its limit (each converged or "
+                "ended at a cap of its own): the gap is the grid search's (it compares the grid's priors, "
+                "not all policies), and a longer --time-limit would not narrow it"]
     if result.stopped_by == "cluster cap":
         return [f"the bounds are the cluster policies' at their largest cap ({CLUSTER_CAPS[-1]} clusters "
                 "per junction, road and automaton state), tighter than the search's before them: a longer "
@@ -269,10 +270,12 @@ def _stop_explained(result: SynthesisResult) -> list[str]:
         return [joint_cap_note(result.stopped_by, result.seconds)]
     if result.stopped_by != "node budget":
         return []
+    remedy = ("before its time limit: a longer --time-limit would not tighten these bounds, a larger "
+              "--node-budget may (about 1 kB of memory a node)")
+    if not reached_node_budget(result.stats):   # a robust objective's run, not the returned policy's
+        return [f"a run of the robust objective stopped at its node budget {remedy}"]
     nodes = max(run.nodes for run in result.stats.runs if isinstance(run, SearchRun))
-    return [f"the search stopped at its node budget ({nodes:,} nodes) after {result.seconds:.1f} s, "
-            "before its time limit: a longer --time-limit would not tighten these bounds, a larger "
-            "--node-budget may (about 1 kB of memory a node)"]
+    return [f"the search stopped at its node budget ({nodes:,} nodes) after {result.seconds:.1f} s, {remedy}"]
 
 
 def bounds_notes(result: SynthesisResult, tau: float) -> list[str]:

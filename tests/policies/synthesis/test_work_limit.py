@@ -162,34 +162,37 @@ def test_a_skipped_candidate_names_the_limit_that_leaves_it_no_room(work_limit, 
     assert schedule.skipped == 1
 
 
-@pytest.mark.parametrize(("skipped", "cut", "work_limit", "gap", "named"), [
-    (0, 0, None, 0.02, "candidate grid"),     # every candidate ran, none cut: the grid's own gap
-    (0, 0, None, 0.0, "convergence"),
-    (1, 0, None, 0.02, "time limit"),         # the clock skipped a candidate
-    (0, 1, None, 0.02, "time limit"),         # ... or cut a run short
-    (0, 1, 10**9, 0.02, "work limit"),        # the work limit did
+@pytest.mark.parametrize(("skipped", "cut", "at_budget", "work_limit", "gap", "named"), [
+    (0, 0, 0, None, 0.02, "candidate grid"),     # every candidate ran, none cut: the grid's own gap
+    (0, 0, 0, None, 0.0, "convergence"),
+    (0, 0, 1, None, 0.02, "node budget"),        # a run's search stopped at its node budget
+    (1, 0, 0, None, 0.02, "time limit"),         # the clock skipped a candidate
+    (0, 1, 1, None, 0.02, "time limit"),         # ... or cut a run short
+    (0, 1, 0, 10**9, 0.02, "work limit"),        # the work limit did
 ])
-def test_a_robust_synthesis_names_what_ended_it(skipped, cut, work_limit, gap, named):
+def test_a_robust_synthesis_names_what_ended_it(skipped, cut, at_budget, work_limit, gap, named):
     """`population_stop`: a robust synthesis above tau names the limit only when its clock skipped a
-    candidate prior or cut a run (RunSchedule.cut, population.cut_by_its_limit)."""
+    candidate prior or cut a run (RunSchedule.cut, population.run_end)."""
     from types import SimpleNamespace
 
     from trustroute.app.synthesis import population_stop
     from trustroute.policies.work_clock import installed, work_clock
 
     found = SimpleNamespace(objective="robust", candidates_skipped=skipped, runs_cut=cut, gap=gap,
+                            runs_at_node_budget=at_budget,
                             result=SimpleNamespace(stats=None, lower=0.5, upper=0.5 + gap))
     with work_clock(work_limit, SLOW):
         assert population_stop(found, installed(), 1e-3) == named
 
 
 def test_a_run_cut_by_its_limit_is_told_from_one_a_cap_or_convergence_ended(converged):
-    from trustroute.policies.synthesis.population import cut_by_its_limit
+    from trustroute.policies.synthesis.population import run_end
+    from trustroute.policies.work_clock import LIMITS
 
-    assert not cut_by_its_limit(converged)
+    assert run_end(converged) == "convergence"
     short = trustroute.synthesize("phi1", horizon=10, work_limit=2_000, time_limit=SLOW)
-    assert short.stopped_by == "work limit" and cut_by_its_limit(short)
-    assert not cut_by_its_limit(short, cap="node cap")
+    assert short.stopped_by == "work limit" and run_end(short) in LIMITS
+    assert run_end(short, cap="node cap") == "node cap"
 
 
 def test_a_search_stopped_by_its_node_budget_says_so(capsys, tmp_path):
@@ -221,15 +224,20 @@ def test_a_larger_node_budget_lets_the_same_search_converge():
     assert result.stopped_by == "convergence"
 
 
-def test_a_population_bayes_search_stopped_by_its_node_budget_says_so():
+def test_a_population_search_stopped_by_its_node_budget_says_so():
     """The Bayes objective's bounds are its one search's: stopped at the node budget, it says so. The
-    robust objective's candidates run on until the time limit, and it says that."""
+    robust objective whose runs stopped at their node budget, none skipped or cut by the limit, says
+    so too (not the time limit, which ended none of them)."""
+    from trustroute.app.synthesis import stop_notes
+
     bayes = trustroute.synthesize("phi1", horizon=8, time_limit=10.0, population=POPULATION,
                                   objective="bayes", node_budget=300)
     assert bayes.result.stopped_by == "node budget"
-    robust = trustroute.synthesize("phi1", horizon=8, time_limit=4.0, population=POPULATION,
+    robust = trustroute.synthesize("phi1", horizon=8, time_limit=SLOW, population=POPULATION,
                                    objective="robust", node_budget=300, grid_points=1)
-    assert robust.result.stopped_by == "time limit"
+    assert (robust.candidates_skipped, robust.runs_cut) == (0, 0) and robust.runs_at_node_budget > 0
+    assert robust.result.stopped_by == "node budget"
+    assert "stopped at its node budget" in stop_notes(robust.result, 1e-3, False)[1]
 
 
 def test_a_bad_node_budget_is_one_error_line_with_its_fix(capsys):
