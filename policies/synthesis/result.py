@@ -233,7 +233,8 @@ class SynthesisResult(Generic[PolicyT, StatsT]):
         own (work_clock.CAPS: "cluster cap" and, unbounded, "depth cap" (SynthesisStats.stopped) of
         the belief-MDP synthesis; "node cap", "junction cap",
         "depth cap" or "rounding margin" of the trust-state synthesis, JOINT_STOPS in
-        policies/trust_state_synthesis/synthesis.py), "work limit" or "time limit"
+        policies/trust_state_synthesis/synthesis.py; "candidate grid" of the robust population
+        objective, every candidate prior run and none cut), "work limit" or "time limit"
     (policies/work_clock.py, `stopped_by`; None where the caller did not say).
     """
 
