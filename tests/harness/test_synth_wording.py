@@ -139,8 +139,10 @@ def test_a_run_the_wall_clock_cut_after_its_gap_reached_tau_does_not_say_before_
     limit came first."""
     from trustroute.app.synthesis import stop_line
 
-    assert stop_line("time limit", 1e-3, False) == "stopped by: time limit, before the gap reached tau = 0.001"
+    before = stop_line("time limit", 1e-3, False)
+    assert before == "stopped by: time limit, before the gap reached tau = 0.001"
     cut_late = stop_line("time limit", 1e-3, True)
     assert "before the gap reached tau" not in cut_late, cut_late
-    assert cut_late.startswith("stopped by: time limit, though the gap reached tau = 0.001") and "load" in cut_late
+    assert cut_late.startswith("stopped by: time limit, though the gap reached tau = 0.001")
+    assert "load" in cut_late
     assert stop_line("convergence", 1e-3, True) == "stopped by: convergence (the gap reached tau = 0.001)"
