@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from tests.cli import cli_json
+from tests.robust_study_config import robust_study_text
 from trustroute.analysis.study.analysis import study_analysis
 from trustroute.harness.study.config import BELIEF_SOURCES, load_study_config
 from trustroute.harness.study.context import study_context
@@ -26,18 +27,8 @@ STUDY_PARTICIPANTS, PLANNED_PARTICIPANTS = 240, 1200
 def configs(tmp_path_factory):
     """(the config a plan reads, a study of that config with the types as its drivers)."""
     root = tmp_path_factory.mktemp("plan_sources")
-    text = f"""[study]
-participants = {STUDY_PARTICIPANTS}
-seed = 5
-engine = "model"
-specs = ["phi1"]
-conditions = ["aware", "robust", "free"]
-horizon = 3
-policy_cache = "{root / 'cache'}"
-robust_population = "{EXAMPLE_POPULATION_PATH}"
-"""
-    (root / "plan.toml").write_text(text)
-    (root / "study.toml").write_text(text + f'\n[drivers]\npopulation = "{EXAMPLE_POPULATION_PATH}"\n')
+    (root / "plan.toml").write_text(robust_study_text(root, STUDY_PARTICIPANTS, drivers=False))
+    (root / "study.toml").write_text(robust_study_text(root, STUDY_PARTICIPANTS))
     run_and_consolidate(load_study_config(root / "study.toml"), root / "out", 1, None, progress=False,
                         echo=lambda *_: None)
     return root / "plan.toml", root / "out"

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from tests.robust_study_config import robust_study_text
 from trustroute.analysis.belief_sources import (
     default_belief_source,
     reference_model,
@@ -32,19 +33,7 @@ from trustroute.policies.belief.driver_types import TypeLiftedModel
 def robust_study(tmp_path_factory):
     root = tmp_path_factory.mktemp("robust_study")
     path = root / "study.toml"
-    path.write_text(f"""[study]
-participants = 6
-seed = 5
-engine = "model"
-specs = ["phi1"]
-conditions = ["aware", "robust", "free"]
-horizon = 3
-policy_cache = "{root / 'cache'}"
-robust_population = "{EXAMPLE_POPULATION_PATH}"
-
-[drivers]
-population = "{EXAMPLE_POPULATION_PATH}"
-""")
+    path.write_text(robust_study_text(root, 6))
     run_and_consolidate(load_study_config(path), root / "out", 1, None, progress=False, echo=lambda *_: None)
     return root / "out"
 

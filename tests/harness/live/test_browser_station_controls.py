@@ -7,6 +7,7 @@ Never skips: without Chromium it fails and says how to install it."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 
@@ -241,6 +242,19 @@ def outside(value: float, dead_zone: float) -> float:
     return math.copysign(max(0.0, abs(value) - dead_zone) / (1 - dead_zone), value)
 
 
+@contextlib.contextmanager
+def devices_ready(station, inputs: list[str]):
+    """A station whose page reads devices the test sets (DEVICES), welcomed to a study of
+    `inputs`, on its ready step: yields (page, socket, sent_after, a frame of the scene)."""
+    frame, _ = scene_on(station.net_path)
+    with station.open() as (page, socket):
+        sent_after = listen(page, socket)
+        page.evaluate(DEVICES)
+        welcome(socket, inputs)
+        socket.send(state_message("ready", trial=0))
+        yield page, socket, sent_after, frame
+
+
 def controls(sent: list[dict]) -> list[tuple]:
     return [(c["source"], c["steer"], c["throttle"], c["brake"]) for c in sent if c["type"] == "control"]
 
@@ -250,12 +264,7 @@ def test_a_calibration_is_the_devices_own_and_another_device_is_read_by_the_stan
     after it is read in the standard mapping (its stick steers, its trigger accelerates), not
     through the wheel's axes (where its resting axis 1 would be the accelerator half pressed); the
     wheel back, its calibration still applies."""
-    frame, _ = scene_on(station.net_path)
-    with station.open() as (page, socket):
-        sent_after = listen(page, socket)
-        page.evaluate(DEVICES)
-        welcome(socket, ["wheel", "gamepad"])
-        socket.send(state_message("ready", trial=0))
+    with devices_ready(station, ["wheel", "gamepad"]) as (page, socket, sent_after, frame):
         page.locator("#calibrate").wait_for(state="visible")
         page.evaluate(SET_DEVICES, [wheel()])
         calibrate_wheel(page)
@@ -273,12 +282,7 @@ def test_a_wheel_not_calibrated_is_not_read_and_the_station_offers_the_calibrati
     the standard layout (its pedals, axes there, would do nothing): the ready step and, in a
     drive, the notice over the view say it must be calibrated, nothing is sent for it, and
     *Calibrate the wheel* is there in the drive too; once calibrated it drives."""
-    frame, _ = scene_on(station.net_path)
-    with station.open() as (page, socket):
-        sent_after = listen(page, socket)
-        page.evaluate(DEVICES)
-        welcome(socket, ["wheel", "gamepad"])
-        socket.send(state_message("ready", trial=0))
+    with devices_ready(station, ["wheel", "gamepad"]) as (page, socket, sent_after, frame):
         page.evaluate(SET_DEVICES, [wheel()])
         asked = "not calibrated"
         page.locator("#calibration-text").filter(has_text=asked).wait_for()
@@ -314,12 +318,7 @@ def test_a_dead_zone_keeps_a_drifting_stick_or_an_off_centre_wheel_from_steering
 def test_a_calibrated_wheel_resting_off_centre_sends_no_steering(station):
     """The dead zone applies after the calibration: a wheel resting a little off the centre it
     was calibrated at, its pedals a little off their rest, reads 0; full lock is still 1."""
-    frame, _ = scene_on(station.net_path)
-    with station.open() as (page, socket):
-        sent_after = listen(page, socket)
-        page.evaluate(DEVICES)
-        welcome(socket, ["wheel"])
-        socket.send(state_message("ready", trial=0))
+    with devices_ready(station, ["wheel"]) as (page, socket, sent_after, frame):
         page.evaluate(SET_DEVICES, [wheel()])
         calibrate_wheel(page)
         drive(page, socket, {**frame, "speed": 5.0})

@@ -131,6 +131,18 @@ def test_takeover_intervals_and_states(recorded):
         np.testing.assert_allclose(times, [row.injected_time])
 
 
+def _assert_belief_series(entities, belief: np.ndarray, spec) -> None:
+    """The recording's belief mean, P(trust >= 6) and belief atoms are those of `belief` (rows:
+    the logged trust beliefs, one per road)."""
+    _, mean = _column(entities["/trust/belief_mean"], "Scalars:scalars")
+    np.testing.assert_allclose(np.ravel(mean), belief @ np.arange(1, 8))
+    _, high = _column(entities["/belief/p_trust_ge_6"], "Scalars:scalars")
+    np.testing.assert_allclose(np.ravel(high), belief[:, 5:].sum(axis=1))
+    for name, atom in spec.belief_atoms.items():
+        _, values = _column(entities[f"/belief/{name}"], "Scalars:scalars")
+        np.testing.assert_allclose(np.ravel(values), belief @ np.asarray(atom.coeffs))
+
+
 def test_every_trust_and_belief_series(recorded):
     record, entities, _, spec, _ = recorded
     roads = record.roads
@@ -139,13 +151,8 @@ def test_every_trust_and_belief_series(recorded):
     true = [v[0] for v in true]
     np.testing.assert_array_equal(true, roads["trust_after"].to_numpy(dtype=float))
     belief = np.array(roads["belief_after"].tolist())
-    _, mean = _column(entities["/trust/belief_mean"], "Scalars:scalars")
-    np.testing.assert_allclose(np.ravel(mean), belief @ np.arange(1, 8))
-    _, high = _column(entities["/belief/p_trust_ge_6"], "Scalars:scalars")
-    np.testing.assert_allclose(np.ravel(high), belief[:, 5:].sum(axis=1))
+    _assert_belief_series(entities, belief, spec)
     for name, atom in spec.belief_atoms.items():
-        _, values = _column(entities[f"/belief/{name}"], "Scalars:scalars")
-        np.testing.assert_allclose(np.ravel(values), belief @ np.asarray(atom.coeffs))
         _, threshold = _column(entities[f"/belief/{name}_threshold"], "Scalars:scalars")
         assert np.ravel(threshold).tolist() == [atom.offset] * n
     reported = roads["reported_trust"].to_numpy()
@@ -265,13 +272,7 @@ def test_a_type_aware_avs_episode_is_recorded_on_its_trust_marginal(town, net_pa
     entities: dict[str, list] = {}
     for chunk in rr.chunk.RrdReader(path).stream().to_chunks():
         entities.setdefault(chunk.entity_path, []).append(chunk)
-    _, mean = _column(entities["/trust/belief_mean"], "Scalars:scalars")
-    np.testing.assert_allclose(np.ravel(mean), belief @ np.arange(1, 8))
-    _, high = _column(entities["/belief/p_trust_ge_6"], "Scalars:scalars")
-    np.testing.assert_allclose(np.ravel(high), belief[:, 5:].sum(axis=1))
-    for name, atom in spec.belief_atoms.items():
-        _, values = _column(entities[f"/belief/{name}"], "Scalars:scalars")
-        np.testing.assert_allclose(np.ravel(values), belief @ np.asarray(atom.coeffs))
+    _assert_belief_series(entities, belief, spec)
     from trustroute.harness.simulation.rerun_log import marginal_coefficients
 
     # a type-belief atom (1 on the first type's block) has no value on the trust marginal
