@@ -51,7 +51,8 @@ class ServeOptions:
     public_origins: tuple[str, ...] = option(
         "--public-origin", multiple=True, metavar="URL",
         help="The address participants reach the study at behind a reverse proxy (e.g. "
-        "https://study.example.org); repeatable. Pages from any other origin are refused.")
+        "https://study.example.org); repeatable. Pages from any other origin, and requests "
+        "addressed to any other host, are refused.")
 
     def server_options(self) -> ServerOptions:
         """The station's options, the public origins checked."""

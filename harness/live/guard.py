@@ -6,10 +6,14 @@
   bind) and the public addresses it is told it is reached at behind a proxy (`--public-origin`).
   A request without `Origin` comes from no browser page (a script, the scripted participant) and
   still needs its token.
+- **Hosts.** Every request and websocket handshake must be addressed (its `Host`) to one of those
+  origins, or it is refused (421) before anything else is looked at: a page of another site whose
+  name is made to resolve to this machine (DNS rebinding) sends that site's name, and so reads
+  not even the pages that need no token.
 - **Connections per participant.** `ConnectionGate`: at most MAX_SOCKETS open websockets per
   participant (the live one and the one replacing it) and new connections at most OPEN_BURST at
   once, then OPEN_RATE a second (a token bucket per participant).
-- **Request bodies.** `RequestGuard` (ASGI middleware before every HTTP route): a state-changing
+- **Request bodies.** `RequestGuard` (ASGI middleware before every route): a state-changing
   request needs one of our origins (or none) and a Content-Length; a request framed by
   Transfer-Encoding is refused (a chunked body has no length to check before it is read); the
   body actually received is counted, reading stopped and the request refused (413) as soon as it
@@ -136,6 +140,15 @@ def own_origins(host: str, port: int, public: tuple[str, ...] = ()) -> frozenset
     return frozenset(origin for origin in origins if origin is not None)
 
 
+def addressed_origins(host: str) -> frozenset[str]:
+    """The origins a request's `Host` names (over http and https); none for a Host that is no
+    bare host[:port] (empty, or with a user, path, query or fragment)."""
+    if not host or any(mark in host for mark in "@/\\?# "):
+        return frozenset()
+    addressed = (normal_origin(f"http://{host}"), normal_origin(f"https://{host}"))
+    return frozenset(origin for origin in addressed if origin)
+
+
 def origin_allowed(headers: Mapping[str, str], origins: frozenset[str] | None) -> bool:
     """Whether a request may act: no Origin (no browser page sent it), or one of ours; with no
     origins configured (an application embedded without `serve`), the origin the request was
@@ -144,10 +157,14 @@ def origin_allowed(headers: Mapping[str, str], origins: frozenset[str] | None) -
     if origin is None:
         return True
     if origins is None:
-        host = headers.get("host", "")
-        addressed = (normal_origin(f"http://{host}"), normal_origin(f"https://{host}"))
-        origins = frozenset(origin for origin in addressed if origin)
+        origins = addressed_origins(headers.get("host", ""))
     return normal_origin(origin) in origins
+
+
+def host_allowed(headers: Mapping[str, str], origins: frozenset[str] | None) -> bool:
+    """Whether a request was addressed (its Host) to one of our origins (the module's "Hosts");
+    with no origins configured (an application embedded without `serve`), to any."""
+    return origins is None or not addressed_origins(headers.get("host", "")).isdisjoint(origins)
 
 
 class ConnectionGate:
@@ -172,23 +189,29 @@ class ConnectionGate:
 
 
 class RequestGuard:
-    """ASGI middleware before every HTTP route (the module's "Request bodies"); the origins are
-    the application's `state.origins` (None: the origin each request was addressed to)."""
+    """ASGI middleware before every route: the Host of every request and websocket handshake
+    (the module's "Hosts"), then an HTTP request's headers and body ("Request bodies"); the
+    origins are the application's `state.origins` (None: any Host, and the origin each request
+    was addressed to)."""
 
     def __init__(self, app: ASGIApp, limit: int = MAX_BODY_BYTES) -> None:
         self.app, self.limit = app, limit
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http":
+        if scope["type"] not in ("http", "websocket"):
             await self.app(scope, receive, send)
             return
-
-        async def secured(message: Message) -> None:
-            if message["type"] == "http.response.start":
-                MutableHeaders(scope=message).update(SECURITY_HEADERS)
-            await send(message)
-
         origins = scope["app"].state.origins
+        if not host_allowed(Headers(scope=scope), origins):
+            await misdirected(Headers(scope=scope).get("host", ""))(scope, receive, secured(send))
+        elif scope["type"] == "websocket":
+            await self.app(scope, receive, send)
+        else:
+            await self.guarded(scope, receive, secured(send), origins)
+
+    async def guarded(self, scope: Scope, receive: Receive, send: Send,
+                      origins: frozenset[str] | None) -> None:
+        """An HTTP request addressed to us: its headers and body checked, then the application."""
         refusal = request_refusal(scope["method"], Headers(scope=scope), origins, self.limit)
         if refusal is None:
             received = await read_body(receive, self.limit)
@@ -197,9 +220,27 @@ class RequestGuard:
             else:
                 refusal = parse_body(received, scope)
                 if refusal is None:
-                    await self.app(scope, replayed(received, receive), secured)
+                    await self.app(scope, replayed(received, receive), send)
                     return
-        await refusal(scope, receive, secured)
+        await refusal(scope, receive, send)
+
+
+def secured(send: Send) -> Send:
+    """`send` with SECURITY_HEADERS on every response (a websocket handshake's refusal too)."""
+
+    async def sending(message: Message) -> None:
+        if message["type"] in ("http.response.start", "websocket.http.response.start"):
+            MutableHeaders(scope=message).update(SECURITY_HEADERS)
+        await send(message)
+
+    return sending
+
+
+def misdirected(host: str) -> JSONResponse:
+    """421 for a request (or websocket handshake) addressed to a host that is none of ours."""
+    detail = (f"this server is not reached as {host[:80]!r}: open it at the address it printed "
+              "(behind a proxy: --public-origin names the address it is reached at)")
+    return refused(421, {"detail": error_reply("forbidden", detail)})
 
 
 def refused(status: int, content: dict) -> JSONResponse:

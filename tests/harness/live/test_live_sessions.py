@@ -159,6 +159,11 @@ def served(tmp_path):
         study.close()
 
 
+def host(address) -> bytes:
+    """The Host header line of a request to the served `address` (one the server answers)."""
+    return f"Host: {address[0]}:{address[1]}".encode()
+
+
 def closed_within(address, data: bytes, seconds: float) -> tuple[bool, bytes]:
     """(whether the server closed the connection within `seconds`, what it sent)."""
     with socket.create_connection(address, timeout=seconds) as connection:
@@ -176,18 +181,18 @@ def closed_within(address, data: bytes, seconds: float) -> tuple[bool, bytes]:
 def test_idle_and_slow_connections_are_closed(served):
     address, _ = served
     assert closed_within(address, b"", 2.0)[0]                                         # idle
-    assert closed_within(address, b"GET /api/me HTTP/1.1\r\nHost: x\r\n", 2.0)[0]     # slow headers
-    body = (b"POST /api/claim HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
-            b"Content-Length: 60\r\n\r\n{")
+    assert closed_within(address, b"GET /api/me HTTP/1.1\r\n%s\r\n" % host(address), 2.0)[0]   # slow headers
+    body = (b"POST /api/claim HTTP/1.1\r\n%s\r\nContent-Type: application/json\r\n"
+            b"Content-Length: 60\r\n\r\n{" % host(address))
     assert closed_within(address, body, 2.0)[0]                                        # slow body
-    whole = b"GET /static/live.css HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
+    whole = b"GET /static/live.css HTTP/1.1\r\n%s\r\nConnection: close\r\n\r\n" % host(address)
     closed, received = closed_within(address, whole, 2.0)
     assert closed and received.startswith(b"HTTP/1.1 200")                              # a whole request
 
 
 def served_request(connection: socket.socket, path: str = "/api/me") -> bytes:
     """One keep-alive request on an open connection: its whole response (by its Content-Length)."""
-    connection.sendall(f"GET {path} HTTP/1.1\r\nHost: x\r\n\r\n".encode())
+    connection.sendall(b"GET %s HTTP/1.1\r\n%s\r\n\r\n" % (path.encode(), host(connection.getpeername())))
     received = b""
     while b"\r\n\r\n" not in received:
         received += connection.recv(4096)
@@ -218,7 +223,7 @@ def test_connections_beyond_the_cap_are_refused_at_once(tmp_path):
             finally:
                 for connection in held:
                     connection.close()
-            whole = b"GET /static/live.css HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
+            whole = b"GET /static/live.css HTTP/1.1\r\n%s\r\nConnection: close\r\n\r\n" % host(address)
             deadline = time.monotonic() + 3.0
             while not (received := closed_within(address, whole, 2.0)[1]).startswith(b"HTTP/1.1 200"):
                 assert time.monotonic() < deadline, received[:80]   # (the server sees the closes soon)
@@ -259,8 +264,8 @@ def test_a_chunked_body_is_refused_before_it_is_read(served):
     at its headers, whatever Content-Length says beside it, and the connection closed."""
     address, _ = served
     for length in (b"Content-Length: 2\r\n", b""):
-        head = (b"POST /api/claim HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n" + length
-                + b"Transfer-Encoding: chunked\r\n\r\n")
+        head = (b"POST /api/claim HTTP/1.1\r\n%s\r\nContent-Type: application/json\r\n" % host(address)
+                + length + b"Transfer-Encoding: chunked\r\n\r\n")
         chunk = b"100000\r\n" + b"a" * 0x10000   # the first 64 KiB of a 1 MiB chunk
         closed, received = closed_within(address, head + chunk, 2.0)
         assert closed and received.startswith(b"HTTP/1.1 411"), (length, received[:80])
