@@ -1,7 +1,8 @@
 """The live study's web application (FastAPI): HTTP API, participant websocket, links.
 
-Every route checks who is asking (harness/live/auth.py) before it reads anything, and every
-state-changing request and websocket handshake its Origin (harness/live/guard.py):
+Every route checks who is asking (harness/live/auth.py) before it reads anything; before that,
+every request and websocket handshake is checked for its Host, and every state-changing request
+and websocket handshake for its Origin (harness/live/guard.py):
 
     GET  /login?token=T                the console link: T (one-time) is exchanged for a fresh
                                        session token in the HttpOnly cookie, then to /console
@@ -51,6 +52,7 @@ from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Redirect
 from starlette.requests import HTTPConnection
 
 from trustroute.harness.live.auth import (
+    CONSOLE_IDLE_SECONDS,
     EXPERIMENTER_COOKIE,
     PARTICIPANT_COOKIE,
     presented_token,
@@ -215,7 +217,10 @@ def holds_role(request: Request, cookie: str) -> bool:
 def experimenter(request: Request) -> None:
     """Dependency: the request carries the experimenter's token (401 without a token, 403 with another)."""
     token = presented_token(request.headers, request.cookies, EXPERIMENTER_COOKIE)
-    if not study_of(request).credentials.is_experimenter(token):
+    credentials = study_of(request).credentials
+    if credentials.console_expired(token):
+        raise refused(401, "forbidden", CONSOLE_EXPIRED)
+    if not credentials.is_experimenter(token):
         raise refused(401 if token is None else 403, "forbidden", "the experimenter's token is needed")
 
 
@@ -244,10 +249,14 @@ async def malformed(request: Request, exc: Exception) -> JSONResponse:
 
 # What a browser opening a page it may not see is told (refused_page), by page.
 CONSOLE_TITLE, STATION_TITLE = "trustroute live: experimenter console", "Driving study"
-NEW_CONSOLE_LINK = ("open the new console link the server printed when it started, or make one with the "
-                    "experimenter token (POST /api/login-link; docs/live_studies.md, Running a session).")
-CONSOLE_REFUSED = ("This browser is not logged in to the console: the server was restarted, or the login "
-                   "is gone. To go on, " + NEW_CONSOLE_LINK)
+MAKE_CONSOLE_LINK = ("make one with the experimenter token (POST /api/login-link; docs/live_studies.md, "
+                     "Running a session).")
+NEW_CONSOLE_LINK = "open the new console link the server printed when it started, or " + MAKE_CONSOLE_LINK
+UNUSED = f"unused for {CONSOLE_IDLE_SECONDS // 3600} hours"
+CONSOLE_EXPIRED = (f"This console login has expired ({UNUSED}): log in again from a console link; "
+                   + MAKE_CONSOLE_LINK)
+CONSOLE_REFUSED = ("This browser is not logged in to the console: the server was restarted, the login "
+                   f"expired ({UNUSED}), or it is gone. To go on, " + NEW_CONSOLE_LINK)
 LOGIN_REFUSED = "This console link is spent or unknown. To log in, " + NEW_CONSOLE_LINK
 # A browser holds one role: whoever sits at a browser holding both cookies could open the console.
 CONSOLE_HERE = ("This browser is logged in to the experimenter console, where a participant could open it: "
@@ -469,8 +478,9 @@ async def station_socket(websocket: WebSocket) -> None:
 
 def live_app(study: LiveStudy, origins: frozenset[str] = frozenset()) -> FastAPI:
     """The application serving `study` (opened: credentials and directory lock held); `origins`:
-    the server's own (guard.own_origins), beside the study's configured public ones; with
-    neither, a request's Origin must be the address it was sent to (its Host)."""
+    the server's own (guard.own_origins), beside the study's configured public ones, which a
+    request's Host must name; with neither, any Host is served and a request's Origin must be the
+    address it was sent to (its Host)."""
     app = FastAPI(title="trustroute live", docs_url=None, redoc_url=None, openapi_url=None)
     app.state.study = study
     public = {normal_origin(origin) for origin in study.options.public_origins}

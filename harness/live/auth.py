@@ -9,20 +9,28 @@ participant: the session it acts on is the one it names, never one chosen by the
 
 The experimenter has three kinds: the experimenter token (printed at start, for scripts: Bearer
 only, never in an address), one-time login tokens (the console link's: the first use spends it,
-`spend_login`) and the session tokens a login puts in the browser's cookie.
+`spend_login`) and the session tokens a login puts in the browser's cookie. A console session
+unused for CONSOLE_IDLE_SECONDS is refused from then on (`console_expired` tells it from a token
+never known): a cookie left in a browser the experimenter walked away from does not open the
+console for good. An open console asks the server every second, so it stays logged in.
 """
 
 from __future__ import annotations
 
 import hashlib
 import secrets
-from collections.abc import Mapping
+import threading
+import time
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 EXPERIMENTER_COOKIE = "trustroute_experimenter"
 PARTICIPANT_COOKIE = "trustroute_participant"
 TOKEN_BYTES = 32
 MAX_TOKEN_CHARS = 128   # longer is no token of ours: refused before hashing
+# A console session unused this long is refused: long enough for a day of sessions with breaks
+# (the console, open, keeps it in use), short enough that a browser left logged in overnight is not.
+CONSOLE_IDLE_SECONDS = 12 * 3600
 
 
 def new_token() -> str:
@@ -45,21 +53,48 @@ def presented_token(headers: Mapping[str, str], cookies: Mapping[str, str], cook
 
 @dataclass
 class Credentials:
-    """The experimenter's token digest, their open console sessions' and their unspent login
+    """The experimenter's token digest, their console sessions' (digest -> the `clock`'s time of
+    its last use; those gone unused for CONSOLE_IDLE_SECONDS in `expired`) and their unspent login
     link's; each participant's (participant index -> digest)."""
 
     experimenter_digest: str
     participants: dict[int, str] = field(default_factory=dict)
-    consoles: list[str] = field(default_factory=list)
+    consoles: dict[str, float] = field(default_factory=dict)
+    expired: set[str] = field(default_factory=set)
     login_digest: str | None = None
+    clock: Callable[[], float] = time.monotonic
+    lock: threading.Lock = field(default_factory=threading.Lock, repr=False, compare=False)
 
     def is_experimenter(self, token: str | None) -> bool:
-        """The experimenter token or a console session's (every digest compared: no early exit)."""
+        """The experimenter token or a console session's still in use, whose use it counts as
+        (every digest compared: no early exit)."""
         if token is None:
             return False
         digest = token_digest(token)
-        known = (self.experimenter_digest, *self.consoles)
-        return any([secrets.compare_digest(digest, each) for each in known])
+        with self.lock:
+            self.expire_idle()
+            matched = [each for each in self.consoles if secrets.compare_digest(digest, each)]
+            for each in matched:
+                self.consoles[each] = self.clock()
+        scripts = secrets.compare_digest(digest, self.experimenter_digest)
+        return scripts or bool(matched)
+
+    def console_expired(self, token: str | None) -> bool:
+        """Whether `token` is a console session's refused for going unused (is_experimenter)."""
+        if token is None:
+            return False
+        digest = token_digest(token)
+        with self.lock:
+            self.expire_idle()
+            return any([secrets.compare_digest(digest, each) for each in self.expired])
+
+    def expire_idle(self) -> None:
+        """Move the console sessions unused for CONSOLE_IDLE_SECONDS to `expired` (lock held)."""
+        now = self.clock()
+        for digest, used in list(self.consoles.items()):
+            if now - used >= CONSOLE_IDLE_SECONDS:
+                del self.consoles[digest]
+                self.expired.add(digest)
 
     def new_login(self) -> str:
         """A one-time login token (returned once); it replaces an unspent one."""
@@ -76,7 +111,8 @@ class Credentials:
             return None
         self.login_digest = None
         session = new_token()
-        self.consoles.append(token_digest(session))
+        with self.lock:
+            self.consoles[token_digest(session)] = self.clock()
         return session
 
     def participant_of(self, token: str | None) -> int | None:

@@ -14,8 +14,9 @@ function showNotice(text) {
   $("notice").classList.toggle("hidden", !text);
 }
 
-// the server restarted (its console logins are new at every start) or the cookie is gone
-const LOGGED_OUT = "This console is no longer logged in (the server was restarted, or the login is gone): "
+// the server restarted (its console logins are new at every start), the login expired (unused for
+// hours: auth.CONSOLE_IDLE_SECONDS) or the cookie is gone
+const LOGGED_OUT = "This console is no longer logged in (the server was restarted, the login expired, or it is gone): "
   + "open the new console link the server printed, or make one with POST /api/login-link.";
 const GONE = "The server does not answer (stopped?); the console tries again every second.";
 

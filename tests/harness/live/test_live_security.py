@@ -15,7 +15,15 @@ from pydantic import TypeAdapter
 from starlette.websockets import WebSocketDisconnect
 
 from trustroute.core.errors import InputError
-from trustroute.harness.live.app import CONSOLE_HERE, POLICY_VIOLATION, STATION_HERE, live_app
+from trustroute.harness.live.app import (
+    CONSOLE_EXPIRED,
+    CONSOLE_HERE,
+    CONSOLE_REFUSED,
+    POLICY_VIOLATION,
+    STATION_HERE,
+    live_app,
+)
+from trustroute.harness.live.auth import CONSOLE_IDLE_SECONDS
 from trustroute.harness.live.protocol import (
     BURST,
     MAX_BODY_BYTES,
@@ -117,6 +125,29 @@ def test_the_console_link_works_once_and_its_cookie_holds_a_fresh_token(client, 
     assert client.get("/api/participants").status_code == 200
     assert client.get(link, follow_redirects=False).status_code == 403
     assert client.get("/api/participants", headers=bearer(experimenter)).status_code == 200   # scripts
+
+
+def test_a_console_login_unused_for_its_idle_time_expires(client, live_study):
+    """A console session's cookie unused for CONSOLE_IDLE_SECONDS is refused, saying how to log in
+    again; each use starts its idle time again; the experimenter token (scripts) does not expire."""
+    now = [1000.0]
+    live_study.credentials.clock = lambda: now[0]
+    assert client.get(f"/login?token={live_study.login_token}", follow_redirects=False).status_code == 303
+    for _ in range(2):   # used within its idle time, twice: in use for longer than one idle time
+        now[0] += CONSOLE_IDLE_SECONDS - 1
+        assert client.get("/api/participants").status_code == 200
+    now[0] += CONSOLE_IDLE_SECONDS
+    expired = client.get("/api/participants")
+    assert expired.status_code == 401 and expired.json()["detail"]["detail"] == CONSOLE_EXPIRED
+    assert "12 hours" in CONSOLE_EXPIRED and "log in again from a console link" in CONSOLE_EXPIRED
+    assert client.post("/api/participants", json={}).status_code == 401
+    page = client.get("/console", headers={"Accept": "text/html"})
+    assert page.status_code == 401 and escape(CONSOLE_REFUSED) in page.text and "expired" in CONSOLE_REFUSED
+    experimenter = bearer(live_study.experimenter_token)
+    assert client.get("/api/participants", headers=experimenter).status_code == 200
+    link = client.post("/api/login-link", headers=experimenter).json()["link"]
+    assert client.get(link, follow_redirects=False).status_code == 303   # logged in again
+    assert client.get("/api/participants").status_code == 200 and live_study.sessions == {}
 
 
 def test_a_browser_holds_one_role_the_console_or_a_participants_session(client, live_study):
