@@ -249,8 +249,8 @@ async def malformed(request: Request, exc: Exception) -> JSONResponse:
 
 # What a browser opening a page it may not see is told (refused_page), by page.
 CONSOLE_TITLE, STATION_TITLE = "trustroute live: experimenter console", "Driving study"
-MAKE_CONSOLE_LINK = ("make one with the experimenter token (POST /api/login-link; docs/live_studies.md, "
-                     "Running a session).")
+MAKE_CONSOLE_LINK = ("make one with the experimenter token (POST /api/login-link; "
+                     "docs/live_studies.md, Running a session).")
 NEW_CONSOLE_LINK = "open the new console link the server printed when it started, or " + MAKE_CONSOLE_LINK
 UNUSED = f"unused for {CONSOLE_IDLE_SECONDS // 3600} hours"
 CONSOLE_EXPIRED = (f"This console login has expired ({UNUSED}): log in again from a console link; "
