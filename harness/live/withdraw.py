@@ -101,6 +101,15 @@ def load_registry(path: Path, fix: str) -> dict:
     return records
 
 
+def registry_records(study_dir: Path) -> list[dict] | None:
+    """Every participant's record in a live study's registry (`load_registry`); None for a study
+    without a registry (a simulated one)."""
+    path = Path(study_dir) / LIVE_DIR / REGISTRY
+    if not path.exists():
+        return None
+    return list(load_registry(path, "restore it from a backup")["participants"].values())
+
+
 ENDED = ("withdrawn", "declined")   # the registry's marks of a participant with no data
 
 
@@ -108,10 +117,9 @@ def ended_counts(study_dir: Path) -> dict[str, int] | None:
     """How many of a live study's participants are withdrawn (not readmitted) and how many declined
     the consent (not asked again since), as its registry says: {"withdrawn": n, "declined": m}; None
     for a study without a registry (a simulated one). `trustroute export` reports the counts."""
-    path = Path(study_dir) / LIVE_DIR / REGISTRY
-    if not path.exists():
+    records = registry_records(study_dir)
+    if records is None:
         return None
-    records = load_registry(path, "restore it from a backup")["participants"].values()
     return {ended: sum(1 for record in records if record.get(ended)) for ended in ENDED}
 
 
@@ -119,12 +127,9 @@ def registry_words(study_dir: Path) -> list[tuple[str, str]]:
     """The words of a live study's registry that name a participant, with what each is: every label
     and token digest ([] for a study without a registry). `trustroute export` keeps them out of the
     package's copied inputs (harness/study/export_inputs.py)."""
-    path = Path(study_dir) / LIVE_DIR / REGISTRY
-    if not path.exists():
-        return []
     kinds = (("label", "a participant's label"), ("digest", "a participant's token digest"))
-    records = load_registry(path, "restore it from a backup")["participants"].values()
-    return [(str(record[key]), what) for record in records for key, what in kinds if record.get(key)]
+    return [(str(record[key]), what) for record in registry_records(study_dir) or []
+            for key, what in kinds if record.get(key)]
 
 
 def write_registry(study_dir: Path, records: dict) -> None:
