@@ -86,6 +86,13 @@ def reached_cap(stats: object, lower: float, upper: float) -> str | None:
     return belief_cap(stats, lower, upper) or reached_joint_cap(stats)
 
 
+def run_stop(result: SynthesisResult, clock: WorkClock | None) -> str:
+    """What ended one synthesis run (work_clock.stopped_by): its convergence, its search's node
+    budget, a cap of its own (`reached_cap`) or the limit of `clock`."""
+    return stopped_by(result.stats.converged, clock, reached_node_budget(result.stats),
+                      reached_cap(result.stats, result.lower, result.upper))
+
+
 def synthesize_single(problem: Problem, settings: SynthesisSettings,
                       out: str | Path | None = None) -> SynthesisResult:
     """A policy for a one-model problem with bounds; its file written at `out` when given
@@ -95,9 +102,7 @@ def synthesize_single(problem: Problem, settings: SynthesisSettings,
         with synthesis_progress(f"synthesizing {problem.spec.name}", settings.progress) as on_iteration:
             result = synthesize_problem(problem, replace(settings, time_limit=limit),
                                         on_iteration=on_iteration)
-    result = replace(result, stopped_by=stopped_by(
-        result.stats.converged, clock, reached_node_budget(result.stats),
-        reached_cap(result.stats, result.lower, result.upper)))
+    result = replace(result, stopped_by=run_stop(result, clock))
     if out is not None:
         save_policy(result, out, problem.town, problem.driver, problem.spec)
     return result
@@ -157,10 +162,8 @@ def population_stop(found: PopulationSynthesis, clock: WorkClock | None, tau: fl
     says so. The robust objective above tau names the limit that skipped a candidate prior or cut a
     run short; else, every prior run and no run cut, the node budget if a run's search stopped at
     it, or the candidate grid (its gap is the grid search's: more time would not narrow it)."""
-    stats, lower, upper = found.result.stats, found.result.lower, found.result.upper
     if found.objective == "bayes":
-        return stopped_by(reached_tau(found, tau), clock, reached_node_budget(stats),
-                          reached_cap(stats, lower, upper))
+        return run_stop(found.result, clock)
     whole = found.candidates_skipped == 0 and found.runs_cut == 0
     return stopped_by(reached_tau(found, tau), clock, whole and found.runs_at_node_budget > 0,
                       "candidate grid" if whole else None)
