@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -402,9 +402,7 @@ def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator,
         decision_seconds=decision_seconds,
         mean_reported=None if reports is None else np.divide(
             report_sum, report_count, out=np.full(count, np.nan), where=report_count > 0),
-        trace=None if traced is None else BatchTrace(
-            roads=traced.roads, incident=traced.incident, takeover=traced.takeover,
-            performance=traced.performance, reports=traced.reports, lengths=junctions + 1),
+        trace=None if traced is None else replace(traced, lengths=junctions + 1),
     )
 
 
