@@ -111,11 +111,11 @@ class LookaheadPolicy(RoutingPolicy):
 
 
 def row(spec_name: str, horizon: int, what: str, values, weights: np.ndarray, seconds: float) -> dict:
-    from trustroute.policies.synthesis.population import mixture_lower, mixture_upper
+    from trustroute.policies.synthesis.population import mixture_lower, mixture_upper, worst_type
 
     return {"name": f"{spec_name}_h{horizon}_{what}", "spec": spec_name, "horizon": horizon,
             "policy": what, "bayes": [mixture_lower(weights, values), mixture_upper(weights, values)],
-            "worst_type": min(v.lower for v in values),
+            "worst_type": worst_type(values),
             "types": {v.name: [v.lower, v.upper] for v in values}, "seconds": seconds}
 
 
