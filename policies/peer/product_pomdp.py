@@ -19,12 +19,14 @@ at accepting q; accepting states are absorbing in the DFA, so "F goal" is the sp
 satisfaction (within H junctions with the step counter). The states are enumerated in numpy
 over the grid (x, θ, q, last (h, e)[, k]) and restricted to those reachable from `begin`;
 Storm reads the DRN text (its explicit format). Probabilities are printed with `repr`, which
-round-trips every double exactly.
+round-trips every double exactly, or (`to_drn(exact=True)`) as the rationals of `exact_factors`,
+for Storm's exact engine.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
 from scipy.sparse import csr_matrix
@@ -33,6 +35,7 @@ from scipy.sparse.csgraph import breadth_first_order
 from trustroute.core import defaults
 from trustroute.core.errors import InputError
 from trustroute.policies.belief.driver_types import base_trust_index
+from trustroute.policies.belief.exact_labels import exact_prior, exact_symbol_matrices, symbol_code
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.spec import Spec
@@ -84,7 +87,9 @@ def check_product_size(spec: Spec, shape: tuple[int, ...], horizon: int | None) 
 class ExplicitProduct:
     """State 0 is `begin`. Choices are numbered in state order; choice c belongs to
     choice_state[c] and is labelled choice_label[c]; transition j goes from choice
-    transition_choice[j] to transition_target[j] with probability transition_probability[j]."""
+    transition_choice[j] to transition_target[j] with probability transition_probability[j],
+    exactly exact_factors[transition_factor[j]]. State s is on road road[s] after step[s]
+    junctions (-1 at `begin`; the step is 0 throughout without a horizon)."""
 
     horizon: int | None
     observation: np.ndarray          # int [n_states]
@@ -94,15 +99,25 @@ class ExplicitProduct:
     transition_choice: np.ndarray
     transition_target: np.ndarray
     transition_probability: np.ndarray
+    transition_factor: np.ndarray
+    exact_factors: tuple[Fraction, ...]
+    road: np.ndarray
+    step: np.ndarray
     query: str = PROPERTY
 
     @property
     def n_states(self) -> int:
         return int(self.observation.size)
 
-    def to_drn(self) -> str:
+    def to_drn(self, exact: bool = False) -> str:
+        """The DRN text; `exact`: each probability as its rational (`exact_factors`)."""
         order = np.argsort(self.transition_choice, kind="stable")
-        targets, probabilities = self.transition_target[order], self.transition_probability[order]
+        targets = self.transition_target[order]
+        if exact:
+            texts = [str(f) for f in self.exact_factors]
+            probabilities = [texts[code] for code in self.transition_factor[order].tolist()]
+        else:
+            probabilities = [repr(p) for p in self.transition_probability[order].tolist()]
         bounds = np.searchsorted(self.transition_choice[order], np.arange(self.choice_state.size + 1))
         first_choice = np.searchsorted(self.choice_state, np.arange(self.n_states + 1))
         lines = ["// the product POMDP of trustroute (docs/trust_states.md)", "@type: POMDP",
@@ -113,7 +128,7 @@ class ExplicitProduct:
             lines.append(f"state {s} {{{int(self.observation[s])}}}{labels}")
             for c in range(first_choice[s], first_choice[s + 1]):
                 lines.append(f"\taction {self.choice_label[c]}")
-                lines.extend(f"\t\t{int(t)} : {float(p)!r}" for t, p in
+                lines.extend(f"\t\t{int(t)} : {p}" for t, p in
                              zip(targets[bounds[c]:bounds[c + 1]], probabilities[bounds[c]:bounds[c + 1]],
                                  strict=True))
         return "\n".join(lines) + "\n"
@@ -153,6 +168,9 @@ def explicit_product(pomdp: TrustPOMDP, spec: Spec, horizon: int | None = None) 
     tr_target = [index(np.full(t0.size, start), t0, q0, np.zeros(t0.size, dtype=np.int64),
                        np.zeros(t0.size, dtype=np.int64))]
     tr_prob = [b0[t0]]
+    n_inc = pomdp.observation_likelihood.shape[0]
+    factor_shape = (n_inc, n_o, n_t, n_t)                   # codes 1 + n_t + (incident, o, θ, θ')
+    tr_factor = [1 + t0]
 
     # Every grid state: x, t, q, o, k.
     grid = np.arange(n_grid)
@@ -188,6 +206,7 @@ def explicit_product(pomdp: TrustPOMDP, spec: Spec, horizon: int | None = None) 
         tr_target.append(index(x2[states][m], t2, next_q[gq[states][m], x2[states][m], t2], o2,
                                np.minimum(gk[states][m] + (horizon is not None), n_k - 1)))
         tr_prob.append(probs[m, o2, t2])
+        tr_factor.append(1 + n_t + np.ravel_multi_index((inc2[m], o2, gt[states][m], t2), factor_shape))
     stop_states = np.flatnonzero(stopping)
     if stop_states.size:
         choice = first[stop_states] + offset[stop_states]
@@ -195,18 +214,18 @@ def explicit_product(pomdp: TrustPOMDP, spec: Spec, horizon: int | None = None) 
         tr_choice.append(choice)
         tr_target.append(1 + stop_states)
         tr_prob.append(np.ones(stop_states.size))
+        tr_factor.append(np.zeros(stop_states.size, dtype=np.int64))
     next_choice += labels_grid.size
     choice_state.append(np.repeat(1 + grid, n_choices_grid))
     choice_label.append(labels_grid)
     c_state = np.concatenate(choice_state)
     c_label = np.concatenate(choice_label)
-    t_choice, t_target, t_prob = (np.concatenate(a) for a in (tr_choice, tr_target, tr_prob))
+    t_choice, t_target, t_prob, t_factor = (np.concatenate(a) for a in (tr_choice, tr_target, tr_prob,
+                                                                        tr_factor))
 
     # Restrict to the states reachable from begin, renumbered in state order.
     n_all = 1 + n_grid
-    graph = csr_matrix((np.ones(t_choice.size), (c_state[t_choice], t_target)), shape=(n_all, n_all))
-    reached = np.zeros(n_all, dtype=bool)
-    reached[breadth_first_order(graph, 0, return_predecessors=False)] = True
+    reached = _reached_from_begin(n_all, c_state[t_choice], t_target)
     new_id = np.cumsum(reached) - 1
     keep_choice = reached[c_state]
     new_choice = np.cumsum(keep_choice) - 1
@@ -217,8 +236,101 @@ def explicit_product(pomdp: TrustPOMDP, spec: Spec, horizon: int | None = None) 
     _, observation = np.unique(observation_key[reached], axis=0, return_inverse=True)
     goal = np.zeros(n_all, dtype=bool)
     goal[1:] = np.asarray(dfa.accepting, dtype=bool)[gq]
+    road, step = np.full(n_all, -1, dtype=np.int64), np.full(n_all, -1, dtype=np.int64)
+    road[1:], step[1:] = gx, gk
     return ExplicitProduct(
         horizon=horizon, observation=observation.ravel().astype(np.int64), goal=goal[reached],
         choice_state=new_id[c_state[keep_choice]], choice_label=tuple(c_label[keep_choice].tolist()),
         transition_choice=new_choice[t_choice[keep_tr]], transition_target=new_id[t_target[keep_tr]],
-        transition_probability=t_prob[keep_tr])
+        transition_probability=t_prob[keep_tr], transition_factor=t_factor[keep_tr],
+        exact_factors=exact_factors(pomdp, outcomes), road=road[reached], step=step[reached])
+
+
+def _reached_from_begin(n_states: int, source: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """bool [n_states]: the states reached from state 0 along the transitions source -> target."""
+    graph = csr_matrix((np.ones(source.size), (source, target)), shape=(n_states, n_states))
+    reached = np.zeros(n_states, dtype=bool)
+    reached[breadth_first_order(graph, 0, return_predecessors=False)] = True
+    return reached
+
+
+def route_choices(product: ExplicitProduct, pomdp: TrustPOMDP, route: list[str]) -> np.ndarray:
+    """int [n_states]: the choice of each state under the policy that drives `route` (road names,
+    the start road first) junction by junction and ends the episode at its last road, as the
+    trust-free baseline does at its destination (policies/routing/free.py); -1 where the episode
+    ends (the route's end, or the horizon). Needs the step counter (a horizon), by which a state
+    knows how far along the route it is."""
+    if product.horizon is None:
+        raise ValueError("a route's choices need the product's step counter: pass a horizon")
+    town = pomdp.town
+    roads = np.array([town.state_index(r) for r in route], dtype=np.int64)
+    choices = np.full(product.n_states, -1, dtype=np.int64)
+    choices[0] = 0                                                  # begin
+    labels = np.asarray(product.choice_label)
+    for k in range(min(len(route) - 1, product.horizon)):
+        slots = np.flatnonzero(pomdp.successor_table[roads[k]] == roads[k + 1])
+        if slots.size == 0:
+            raise ValueError(f"{route[k + 1]} does not follow {route[k]} in the town")
+        here = np.flatnonzero((product.step[product.choice_state] == k)
+                              & (product.road[product.choice_state] == roads[k])
+                              & (labels == f"go{int(slots[0])}"))
+        choices[product.choice_state[here]] = here
+    return choices
+
+
+def induced_chain(product: ExplicitProduct, choices: np.ndarray) -> ExplicitProduct:
+    """The Markov chain of the product under one choice per state (`choices`, as `route_choices`
+    gives them): each state keeps its chosen choice, or (-1) ends the episode in a self-loop
+    labelled `end`, restricted to the states reached from `begin`. Its value P(F goal) is the
+    value of that policy (a reachability probability in a finite chain)."""
+    ends = np.flatnonzero(choices < 0)
+    kept = np.zeros(product.choice_state.size, dtype=bool)
+    kept[choices[choices >= 0]] = True
+    keep_tr = kept[product.transition_choice]
+    # old choices first, then one new `end` choice per ending state; ordered by state below
+    c_state = np.concatenate([product.choice_state[kept], ends])
+    c_label = np.concatenate([np.asarray(product.choice_label, dtype=object)[kept],
+                              np.full(ends.size, "end", dtype=object)])
+    old_to_new = np.cumsum(kept) - 1
+    t_choice = np.concatenate([old_to_new[product.transition_choice[keep_tr]],
+                               int(kept.sum()) + np.arange(ends.size)])
+    t_target = np.concatenate([product.transition_target[keep_tr], ends])
+    t_prob = np.concatenate([product.transition_probability[keep_tr], np.ones(ends.size)])
+    t_factor = np.concatenate([product.transition_factor[keep_tr], np.zeros(ends.size, dtype=np.int64)])
+    reached = _reached_from_begin(product.n_states, c_state[t_choice], t_target)
+    order = np.argsort(c_state, kind="stable")                      # one choice per state: by state
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    new_id = np.cumsum(reached) - 1
+    keep_choice = reached[c_state[order]]
+    new_choice = np.cumsum(keep_choice) - 1
+    keep = reached[c_state[t_choice]]
+    return ExplicitProduct(
+        horizon=product.horizon, goal=product.goal[reached],
+        observation=np.unique(product.observation[reached], return_inverse=True)[1].ravel().astype(np.int64),
+        choice_state=new_id[c_state[order][keep_choice]],
+        choice_label=tuple(c_label[order][keep_choice].tolist()),
+        transition_choice=new_choice[rank[t_choice[keep]]], transition_target=new_id[t_target[keep]],
+        transition_probability=t_prob[keep], transition_factor=t_factor[keep],
+        exact_factors=product.exact_factors, road=product.road[reached], step=product.step[reached])
+
+
+def exact_factors(pomdp: TrustPOMDP, outcomes: list[tuple[int, int]]) -> tuple[Fraction, ...]:
+    """The product's probabilities as rationals, in the codes of `transition_factor`: 1 (the
+    stop), the exact prior (`exact_prior`), then per (incident, observation o = (h, e), θ, θ')
+    P(o, θ' | θ, incident) = ℓ_o(θ) T_o(θ, θ') from the model's decimals (`exact_symbol_matrices`,
+    the exact process of docs/synthesis.md, "Labels at thresholds"), each (incident, θ) row divided
+    by its sum. Where every transition row sums to 1 as printed the division changes nothing; where
+    one does not (the packaged model's sum to 1 within an ulp) it makes the row a distribution, as
+    a Markov chain and Storm's exact engine need."""
+    matrices, _, _ = exact_symbol_matrices(pomdp, "bayes")
+    n_inc, n_t = pomdp.observation_likelihood.shape[0], pomdp.n_trust
+    table = np.empty((n_inc, len(outcomes), n_t, n_t), dtype=object)
+    for i in range(n_inc):
+        for o, (h, e) in enumerate(outcomes):
+            table[i, o] = matrices[int(symbol_code(i, h, e))]
+        for t in range(n_t):
+            total = sum(table[i, :, t].ravel().tolist(), Fraction(0))
+            if total:
+                table[i, :, t] = [[value / total for value in row] for row in table[i, :, t].tolist()]
+    return (Fraction(1), *exact_prior(pomdp.driver), *table.ravel().tolist())

@@ -7,6 +7,9 @@ both are for the bounded objective. Storm computes in double precision with its 
 (iterative, ε = 1e-6 relative) solvers, so its numbers are sound up to that solver precision,
 not certified in our sense; they are an independent check, reported as Storm gives them.
 
+`storm_exact_value` is Storm's exact engine (rationals, no solver tolerance) on the chain a fixed
+policy makes of the product (`induced_chain`): the policy's value as a rational.
+
 A product in which no reachable state satisfies the spec (no satisfying route fits the horizon)
 has the value 0 exactly; Storm rejects a property whose label no state carries, so it is not run
 and the result says why (`note`). Any other error Storm raises on a product is an InputError.
@@ -18,8 +21,11 @@ import importlib.util
 import tempfile
 import time
 from dataclasses import dataclass
+from fractions import Fraction
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from trustroute.core.errors import InputError
 from trustroute.policies.bracket import Bracket
@@ -61,9 +67,10 @@ class StormResult(Bracket):
 NO_GOAL_NOTE = no_goal_note("Storm")
 
 
-def build_storm_model(product: ExplicitProduct) -> tuple[Any, Any, float]:
+def build_storm_model(product: ExplicitProduct, exact: bool = False) -> tuple[Any, Any, float]:
     """(POMDP, property, build seconds): the product written as DRN and read by Storm (stormpy's
-    objects carry no type information)."""
+    objects carry no type information); `exact`: its probabilities as rationals, read into a model
+    over Storm's exact rationals."""
     require_storm()
     import stormpy
     from stormpy.io import DirectEncodingParserOptions
@@ -71,12 +78,36 @@ def build_storm_model(product: ExplicitProduct) -> tuple[Any, Any, float]:
     started = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="trustroute-storm-") as folder:
         path = Path(folder) / "product.drn"
-        path.write_text(product.to_drn())
+        path.write_text(product.to_drn(exact=exact))
         options = DirectEncodingParserOptions()
         options.build_choice_labeling = True     # Storm's POMDP checks match actions by label
-        model = stormpy.build_model_from_drn(str(path), options=options)
+        build = stormpy.build_model_from_drn[stormpy.Rational] if exact else stormpy.build_model_from_drn
+        model = build(str(path), options=options)
     properties = stormpy.parse_properties(product.query)
     return model, properties[0], time.perf_counter() - started
+
+
+def storm_exact_value(chain: ExplicitProduct) -> Fraction:
+    """P(F goal) from `begin` in a product with one choice per state (`induced_chain`: the value
+    of a fixed policy), by Storm's exact engine: the model over rationals, its exact environment
+    (no iterative solver, no tolerance). 0 without Storm when no state of the chain is a goal."""
+    if not chain.goal.any():
+        return Fraction(0)
+    if int(np.bincount(chain.choice_state, minlength=chain.n_states).max()) > 1:
+        raise ValueError("Storm's exact value of a policy needs one choice per state (induced_chain)")
+    # Storm's exact DRN reader takes a row that is not a distribution as it is (a row summing to
+    # 1 + 1e-12 moves the value without a word), so the rows are checked here, exactly.
+    totals = [Fraction(0)] * chain.choice_state.size
+    for choice, code in zip(chain.transition_choice.tolist(), chain.transition_factor.tolist(), strict=True):
+        totals[choice] += chain.exact_factors[code]
+    if any(total != 1 for total in totals):
+        raise ValueError("a choice's exact probabilities do not sum to 1")
+    model, prop, _ = _storm_call(build_storm_model, chain, exact=True)
+    import stormpy
+
+    result = _storm_call(stormpy.model_checking, model, prop, only_initial_states=True,
+                         force_fully_observable=True, environment=stormpy.environments.exact())
+    return Fraction(str(result.get_value(0)))
 
 
 def _unreachable_goal(product: ExplicitProduct, time_limit: float, resolution: int) -> StormResult:
