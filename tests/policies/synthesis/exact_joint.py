@@ -89,7 +89,8 @@ def exact_joint_value(pomdp: TrustPOMDP, spec: Spec, horizon: int, policy: Joint
     """max over policies (or the value of `policy`, acting on the vehicle's float joint filter:
     policies/evaluation/node_state.py's HiddenState, one history) of P(spec accepted within
     `horizon` junctions), exactly; with `block` the true driver is that type of the population
-    (the AV filtering on the lifted model `pomdp`)."""
+    (the AV filtering on the lifted model `pomdp`). A policy's slot -1 ends the episode there (the
+    accepted share of the joint law counts, as at the horizon)."""
     town = pomdp.town
     model = _Joint(pomdp, spec)
     outcomes = _outcomes(pomdp.driver)
@@ -100,7 +101,7 @@ def exact_joint_value(pomdp: TrustPOMDP, spec: Spec, horizon: int, policy: Joint
         if policy is None or vehicle is None:
             return successors[x]
         slot = int(policy.action_slots(t, np.array([x]), vehicle.joint, vehicle.belief)[0])
-        return [successors[x][slot]]
+        return [] if slot < 0 else [successors[x][slot]]
 
     def value(t: int, x: int, joint: tuple[int, ...], belief: tuple[int, ...],
               vehicle: HiddenState | None) -> Fraction:
@@ -109,8 +110,9 @@ def exact_joint_value(pomdp: TrustPOMDP, spec: Spec, horizon: int, policy: Joint
         key = (t, x, joint, belief, None if vehicle is None else (vehicle.joint.tobytes(),
                                                                   vehicle.belief.tobytes()))
         if key not in memo:
-            best = Fraction(0)
-            for x2 in moves(t, x, vehicle):
+            ahead = moves(t, x, vehicle)
+            best = Fraction(0) if ahead else model.share(joint, model.accepting)
+            for x2 in ahead:
                 total = Fraction(0)
                 for h, e in outcomes:
                     i = int(pomdp.road_incident[x2])
