@@ -7,7 +7,7 @@
 // (buttons or keys). It speaks the websocket protocol of docs/live_studies.md; the HttpOnly
 // participant cookie authenticates the socket. Texts are for the participant: no road ids.
 import { DriverView, webglAvailable } from "./driver_view.js";
-import { Calibration, Inputs, UNCALIBRATED } from "./inputs.js";
+import { Calibration, Inputs, calibrationWanted } from "./inputs.js";
 import { drawMap } from "./map_view.js";
 import { drawArrow, nextTurn } from "./next_turn.js";
 
@@ -243,14 +243,16 @@ function drawStill() {
   if (driverView) requestAnimationFrame(() => { if (state.phase === "paused") driverView.render(true); });
 }
 
-// Continuous driving: the wheel and pedals (or the keyboard) read at every animation frame; the
-// controls are sent when they change, at most every CONTROL_INTERVAL.
+// Continuous driving: the wheel and pedals (or the keyboard) read at every animation frame, every
+// device connected from one look at them; the controls are sent when they change, at most every
+// CONTROL_INTERVAL.
 function readInputs() {
   const now = performance.now() / 1000;
-  const controls = inputs.read(now - lastRead, latest ? latest.speed : 0);
+  const devices = inputs.devices();
+  const controls = inputs.read(now - lastRead, latest ? latest.speed : 0, devices);
   lastRead = now;
   // a device to connect or to calibrate first: said, with the hand-back rule when due
-  const ask = inputs.ask();
+  const ask = inputs.ask(devices);
   offerCalibration(ask);
   if (ask) {
     setText($("incident"), [ask, handBackDue ? HAND_BACK_DUE : ""].join(" ").trim());
@@ -313,20 +315,23 @@ function setDriving(kind, allowed = ["wheel", "gamepad", "keyboard"]) {
 }
 
 // *Calibrate the wheel* (inputs.js, `Calibration`): on the ready step of a continuous study, and in
-// a drive while the device connected waits for its calibration (`ask`: UNCALIBRATED) or while one
-// is under way; the ready step says beside it when the device waits for it.
+// a drive while a device connected waits for its calibration or a control is on no device read
+// (`calibrationWanted`), or while one is under way; the ready step says beside it what is wanted.
+// Called at every animation frame of a drive: the box's class is set, and the box moved, only when
+// that changes.
+let boxShown = null;
 function offerCalibration(ask) {
   const calibrating = !$("calibrate-next").classList.contains("hidden");
-  const wanted = ask === UNCALIBRATED;
-  const shown = state.phase === "ready" || (inDrive(state.phase) && (wanted || calibrating));
+  const wanted = calibrationWanted(ask);
+  const shown = continuous && (state.phase === "ready" || (inDrive(state.phase) && (wanted || calibrating)));
   const box = $("calibrate-box");
-  box.classList.toggle("hidden", !continuous || !shown);
+  if (shown !== boxShown) { box.classList.toggle("hidden", !shown); boxShown = shown; }
   // in a drive below the view, so the view the person watches does not move
   const before = inDrive(state.phase) ? document.querySelector("#drive-step .trust-now") : $("trial-text");
   if (box.nextElementSibling !== before) before.before(box);
   const text = $("calibration-text");
-  const said = state.phase === "ready" && wanted ? UNCALIBRATED : "";
-  if (!calibrating && (said || text.textContent === UNCALIBRATED)) setText(text, said);
+  const said = state.phase === "ready" && wanted ? ask : "";
+  if (!calibrating && (said || calibrationWanted(text.textContent))) setText(text, said);
 }
 // the ready step runs no animation loop to read the device: it is looked at twice a second
 setInterval(() => { if (inputs && state.phase === "ready") offerCalibration(inputs.ask()); }, 500);
