@@ -225,16 +225,37 @@ def gamepad(steer: float = 0, throttle: float = 0, brake: float = 0, name: str =
     return {"id": name, "mapping": "standard", "axes": [steer, 0, 0, 0], "buttons": {6: brake, 7: throttle}}
 
 
-def calibrate_wheel(page, **wheel_values) -> None:
-    """The station's calibration (*Calibrate the wheel*, then *Next* at each step) of the wheel
-    `wheel(**wheel_values)`, held as each step asks."""
+# What a person does at each step of the calibration, by the words of its instruction (inputs.js,
+# STEPS; "Connect": the first step before any device is connected, at rest like it).
+CALIBRATION_STEPS = {"Connect": {}, "Let go": {}, "fully to the left": {"steer": -1},
+                     "fully to the right": {"steer": 1}, "accelerator pedal fully": {"throttle": 1},
+                     "brake pedal fully": {"brake": 1}, "Hold the button": {"button": True}}
+
+
+def calibrate(page, devices) -> list[str]:
+    """The station's calibration (*Calibrate the wheel*, then *Next* at each step) of the devices
+    `devices(**held)` (the list the page finds), held as each step's instruction asks, and let go
+    after it; returns the texts it showed, the last the one it ended with."""
     page.locator("#calibrate").click()
-    for held in ({}, {"steer": -1}, {"steer": 1}, {"throttle": 1}, {"brake": 1}, {"button": True}):
-        page.evaluate(SET_DEVICES, [wheel(**wheel_values, **held)])
+    text = page.locator("#calibration-text")
+    shown = [text.text_content() or ""]
+    for _ in range(len(CALIBRATION_STEPS)):
+        held = next((held for words, held in CALIBRATION_STEPS.items() if words in shown[-1]), None)
+        assert held is not None, f"the calibration asks for no step of a person's: {shown[-1]!r}"
+        page.evaluate(SET_DEVICES, devices(**held))
         page.locator("#calibrate-next").click()
+        shown.append(text.text_content() or "")
+        if shown[-1].startswith("Calibrated"):
+            break
     # (in a drive the box goes once the wheel is read: its text is looked at, not seen)
     wait_until(page, "document.getElementById('calibration-text').textContent.startsWith('Calibrated')")
-    page.evaluate(SET_DEVICES, [wheel(**wheel_values)])
+    page.evaluate(SET_DEVICES, devices())
+    return shown
+
+
+def calibrate_wheel(page, **wheel_values) -> None:
+    """The calibration of the wheel `wheel(**wheel_values)` alone."""
+    calibrate(page, lambda **held: [wheel(**{**wheel_values, **held})])
 
 
 def outside(value: float, dead_zone: float) -> float:
