@@ -155,8 +155,8 @@ export class Inputs {
   ask(devices = this.devices()) {
     if (devices.some((device) => !readable(device))) return UNCALIBRATED;
     if (devices.length) {
-      const readings = devices.map((device) => this.given(device));
-      const missing = CONTROLS.filter((name) => !readings.some((gives) => gives.includes(name)));
+      const given = devices.map((device) => this.gives(device));
+      const missing = CONTROLS.filter((name) => !given.some((controls) => controls.includes(name)));
       return missing.length ? `${NOT_GIVEN}${missing.map((name) => NAMES[name]).join(" or ")}: `
         + "connect the device that does, then click Calibrate the wheel if it is not read." : "";
     }
@@ -166,7 +166,7 @@ export class Inputs {
   }
 
   // The controls a readable device gives.
-  given({ calibration }) {
+  gives({ calibration }) {
     return calibration ? CONTROLS.filter((name) => calibration[name]) : CONTROLS;
   }
 
