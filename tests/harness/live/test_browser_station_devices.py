@@ -125,3 +125,31 @@ def test_a_pedal_box_alone_is_calibrated_without_a_steering_step(station):
         drive(page, socket, {**frame, "speed": 5.0})
         assert controls(sent_after(SET_DEVICES, [pedal_box(throttle=1.0)])) == [("wheel", 0.0, 1.0, 0.0)]
         page.locator("#incident").filter(has_text="No device connected gives the steering").wait_for()
+
+
+# Counts the page's looks at the devices (`window.looks`) and the animation frames (`window.drawn`).
+COUNT_LOOKS = """() => {
+  const look = navigator.getGamepads;
+  window.looks = 0;
+  navigator.getGamepads = () => { window.looks += 1; return look(); };
+  window.drawn = 0;
+  const count = () => { window.drawn += 1; requestAnimationFrame(count); };
+  requestAnimationFrame(count);
+}"""
+COUNTS = "[window.looks, window.drawn]"
+
+
+def test_the_station_looks_at_the_devices_once_an_animation_frame(station):
+    """The controls and what the station asks for come from one look at the devices (one
+    `navigator.getGamepads()` call) in each animation frame of a drive."""
+    with devices_ready(station, ["gamepad"]) as (page, socket, _, frame):
+        page.evaluate(SET_DEVICES, [gamepad()])
+        drive(page, socket, {**frame, "speed": 5.0})
+        page.evaluate(COUNT_LOOKS)
+        page.wait_for_timeout(200)
+        looks, drawn = page.evaluate(COUNTS)
+        page.wait_for_timeout(1000)
+        looks_after, drawn_after = page.evaluate(COUNTS)
+    frames = drawn_after - drawn
+    assert frames > 10, frames
+    assert frames - 2 <= looks_after - looks <= frames + 2, (looks_after - looks, frames)
