@@ -123,19 +123,6 @@ def refiltered(roads: pd.DataFrame, model: DriverModel, town: Town) -> pd.DataFr
     return roads.assign(belief_after=list(marginal))
 
 
-def reference_model(manifest: dict, nominal: DriverModel) -> DriverModel:
-    """The one filter of "reference": the type-aware model of the study's population (the
-    `robust` condition's, else the drivers'), or the study's driver model."""
-    from trustroute.participants.driver_population import load_driver_population
-    from trustroute.policies.belief.driver_types import lift_population
-
-    config = manifest.get("config") or {}
-    path = config.get("robust_population") or config.get("driver_population")
-    if path and Path(path).is_file():
-        return lift_population(load_driver_population(path))
-    return nominal
-
-
 def true_roads(study_dir: Path, roads: pd.DataFrame, episodes: pd.DataFrame, nominal: DriverModel,
                town: Town) -> pd.DataFrame:
     """`roads` on the "true" source: each episode's roads filtered with its driver's true model."""

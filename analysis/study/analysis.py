@@ -51,7 +51,6 @@ from trustroute.analysis.belief_sources import (
     SIMULATED_ENGINES,
     declared_belief_source,
     default_belief_source,
-    reference_model,
     refiltered,
     source_label,
     true_roads,
@@ -73,6 +72,7 @@ from trustroute.analysis.study.sensitivity import sensitivity_table
 from trustroute.analysis.study_directory import load_study, study_inputs
 from trustroute.core.errors import InputError
 from trustroute.core.wording import shown_value
+from trustroute.harness.study.context import reference_model
 
 # bootstrap resampling: fixed, so an analysis is reproducible; each bootstrap draws from a Generator
 # keyed by what it resamples (statistics.py `keyed_rng`)
@@ -165,8 +165,9 @@ def source_satisfaction(study_dir: Path, manifest: dict, episodes: pd.DataFrame,
     simulated studies, whose config can rebuild each driver's true model)."""
     town, driver, specs = study_inputs(manifest, study_dir)
     satisfaction = episodes[["episode_id", "participant", "spec", "condition"]].copy()
+    reference = reference_model(manifest.get("config") or {}, driver)
     variants = {"filter": (roads, "filter"), "reported": (roads, "reported"),
-                "reference": (refiltered(roads, reference_model(manifest, driver), town), "filter")}
+                "reference": (refiltered(roads, reference, town), "filter")}
     if manifest.get("engine") in SIMULATED_ENGINES:   # a person (live, imported logs) has no model
         try:
             variants["true"] = (true_roads(study_dir, roads, episodes, driver, town), "filter")

@@ -10,6 +10,8 @@ and the benchmarks.
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -22,6 +24,7 @@ from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.plan import participant_models, participant_types
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
+from trustroute.policies.belief.driver_types import lift_population
 from trustroute.policies.belief.problem import Problem
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, checked_belief_rule
@@ -50,6 +53,30 @@ class StudyContext:
     def setup(self, spec_name: str, condition: str) -> EpisodeSetup:
         """The episode setup of a (spec, condition) cell."""
         return self.condition_setups.get((spec_name, condition), self.setups[spec_name])
+
+    @functools.cached_property
+    def reference_filter(self) -> DriverModel:
+        """The "reference" belief source's one filter for this study (`reference_model`), made
+        once: the "robust" condition's AV model itself when the study has that condition, so that
+        a judge can tell the AV's own filter by identity (harness/study/planning.py, `is_own_verdict`)."""
+        robust = next((setup.driver_model for setup in self.condition_setups.values()), None)
+        return reference_model(self.config.to_dict(), self.nominal, robust)
+
+
+def reference_model(config: Mapping[str, object], nominal: DriverModel,
+                    robust: DriverModel | None = None) -> DriverModel:
+    """The one filter of the "reference" belief source, the same for every condition
+    (analysis/belief_sources.py): the type-aware model of the study's population, the "robust"
+    condition's (`robust`: that model when the caller holds it lifted already) else the [drivers]';
+    the study's driver model `nominal` when there is neither or its file is gone. `config`: the
+    study's settings by key (StudyConfig.to_dict(), a manifest's "config")."""
+    robust_path = config.get("robust_population")
+    path = robust_path or config.get("driver_population")
+    if not path or not Path(str(path)).is_file():
+        return nominal
+    if robust is not None and path == robust_path:
+        return robust
+    return lift_population(population_of(str(path)))
 
 
 def belief_rule(config: StudyConfig) -> BeliefRule:

@@ -148,13 +148,13 @@ def check_plannable(config: StudyConfig) -> None:
 def source_satisfied(source: str, context: StudyContext, cell: tuple[str, str], result: BatchResult,
                      drivers: tuple[Sequence[DriverModel], np.ndarray]) -> np.ndarray:
     """bool [n]: whether each episode of `result` (a `simulate_batch` of the (spec, condition)
-    `cell`, traced unless `source` is "filter") satisfied the spec on the belief `source`, as the
-    study's analysis judges a logged episode (docs/study.md, its item on satisfaction from the logs): "filter"
-    the AV's own verdict; "true" each episode's driver's exact filter (`drivers`: the true models
-    and each episode's index in them); "reference" one filter for every condition, the type-aware
-    model of the "robust" condition's population, else the study's driver model (plan refuses a
-    config's [drivers]); "reported" a point mass on the last report. The spec as written (belief
-    atoms over trust) is read on the trust marginals."""
+    `cell`, traced unless `source` is "filter") satisfied the spec on the belief
+    `source`, as the study's analysis judges a logged episode (docs/study.md, its item on
+    satisfaction from the logs): "filter" the AV's own verdict; "true" each episode's driver's exact
+    filter (`drivers`: the true models and each episode's index in them); "reference" the study's one
+    filter for every condition (StudyContext.reference_filter; plan refuses a config's [drivers]);
+    "reported" a point mass on the last report. The spec as written (belief atoms over trust) is
+    read on the trust marginals."""
     setup = context.setup(*cell)
     if is_own_verdict(source, context, setup, drivers[0]):
         return result.satisfied
@@ -167,7 +167,7 @@ def source_satisfied(source: str, context: StudyContext, cell: tuple[str, str], 
         beliefs = reported_beliefs(initial, trace.reports, context.nominal.trust_levels)
     else:
         models, index = (drivers if source == "true"
-                         else ([_reference_model(context)], np.zeros(shape[0], dtype=np.int64)))
+                         else ([context.reference_filter], np.zeros(shape[0], dtype=np.int64)))
         beliefs = np.zeros(shape)
         for k in np.unique(index).tolist():
             rows = np.flatnonzero(index == k)
@@ -188,11 +188,6 @@ def is_own_verdict(source: str, context: StudyContext, setup: EpisodeSetup,
         return True
     if source == "reported" or setup.belief_rule != "bayes":
         return False
-    models = drivers if source == "true" else [_reference_model(context)]
+    models = drivers if source == "true" else [context.reference_filter]
     return all(model is setup.driver_model for model in models)
 
-
-def _reference_model(context: StudyContext) -> DriverModel:
-    """The "reference" source's one filter (analysis/belief_sources.py `reference_model`): the
-    type-aware model the "robust" condition's AV filters with, else the study's driver model."""
-    return next((setup.driver_model for setup in context.condition_setups.values()), context.nominal)

@@ -62,3 +62,38 @@ def test_nominal_and_population_configs_do_not_share_a_context(tmp_path):
     varied = type(varied)(**{**varied.__dict__, "source_path": nominal.source_path})
     assert study_context(nominal).participants is None
     assert study_context(varied).participants is not None
+
+
+def test_the_reference_filter_is_one_rule_for_the_plan_and_the_analysis(tmp_path):
+    """The "reference" source's filter (harness/study/context.py, `reference_model`): the robust
+    population's type-aware model, else the [drivers] population's, else the driver model; the
+    robust condition's own model object when the caller holds it; the context's is the same rule,
+    also for a config that names a robust population without running that condition."""
+    from trustroute.app.inputs import driver_of
+    from trustroute.harness.study.context import reference_model
+    from trustroute.participants.driver_population import (
+        EXAMPLE_POPULATION_PATH,
+        POPULATIONS,
+        load_driver_population,
+    )
+    from trustroute.policies.belief.driver_types import TypeLiftedModel
+
+    nominal, held = driver_of(None), driver_of(None)
+    three, real = str(EXAMPLE_POPULATION_PATH), str(POPULATIONS.resolve("driver_population_real"))
+    assert reference_model({}, nominal) is nominal
+    assert reference_model({"robust_population": str(tmp_path / "gone.json")}, nominal) is nominal
+    both = reference_model({"robust_population": three, "driver_population": real}, nominal)
+    assert isinstance(both, TypeLiftedModel) and both.n_types == 3
+    drivers = reference_model({"robust_population": None, "driver_population": real}, nominal)
+    # a one-type population's type-aware model is its type's model
+    only = load_driver_population(real).types[0].model
+    assert drivers is not nominal and drivers.provenance == only.provenance != nominal.provenance
+    assert reference_model({"robust_population": three}, nominal, robust=held) is held
+    assert reference_model({"driver_population": three}, nominal, robust=held) is not held
+
+    config = _config(tmp_path, "study.toml", "")
+    context = study_context(type(config)(**{**config.__dict__, "robust_population": three}))
+    assert not context.condition_setups   # "free" only: no robust AV to take the model from
+    filtered = context.reference_filter
+    assert isinstance(filtered, TypeLiftedModel) and filtered.n_types == 3
+    assert context.reference_filter is filtered

@@ -17,13 +17,13 @@ from click.testing import CliRunner
 from tests.robust_study_config import robust_study_text
 from trustroute.analysis.belief_sources import (
     default_belief_source,
-    reference_model,
     refiltered,
     true_roads,
 )
 from trustroute.analysis.study.analysis import study_analysis
 from trustroute.analysis.study_directory import load_study, study_inputs
 from trustroute.harness.study.config import load_study_config
+from trustroute.harness.study.context import reference_model
 from trustroute.harness.study.runner import run_and_consolidate
 from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH, load_driver_population
 from trustroute.policies.belief.driver_types import TypeLiftedModel
@@ -51,7 +51,7 @@ def test_the_default_source_is_neutral_to_every_condition(robust_study, default_
     analysis = default_analysis
     assert analysis.belief_source == "true" and analysis.source_note == ""
     town, driver, _ = study_inputs(manifest, robust_study)
-    model = reference_model(manifest, driver)
+    model = reference_model(manifest["config"], driver)
     assert isinstance(model, TypeLiftedModel) and model.n_types == 3
     reference = refiltered(roads, model, town).set_index(["episode_id", "index"])["belief_after"]
     logged = roads.set_index(["episode_id", "index"])["belief_after"].loc[reference.index]
