@@ -128,7 +128,7 @@ def simulate_studies(context: StudyContext, participants: int, studies: int, rng
             result = simulate_batch(setup, context.policies[(spec, condition)], total, rng, drivers=drivers,
                                     driver_index=index, report_accuracy=accuracy,
                                     trace=not is_own_verdict(source, context, setup, drivers))
-            judged = source_satisfied(source, context, (spec, condition), result, (drivers, index))
+            judged = source_satisfied(source, context, (spec, condition), setup, result, (drivers, index))
             satisfied[:, :, s, c] = judged.reshape(studies, participants)
             reported[:, :, s, c] = np.asarray(result.mean_reported).reshape(studies, participants)
     return SimulatedStudies(participants=participants, specs=specs, conditions=conditions,
@@ -145,17 +145,16 @@ def check_plannable(config: StudyConfig) -> None:
                          "or --pilot")
 
 
-def source_satisfied(source: str, context: StudyContext, cell: tuple[str, str], result: BatchResult,
-                     drivers: tuple[Sequence[DriverModel], np.ndarray]) -> np.ndarray:
+def source_satisfied(source: str, context: StudyContext, cell: tuple[str, str], setup: EpisodeSetup,
+                     result: BatchResult, drivers: tuple[Sequence[DriverModel], np.ndarray]) -> np.ndarray:
     """bool [n]: whether each episode of `result` (a `simulate_batch` of the (spec, condition)
-    `cell`, traced unless `source` is "filter") satisfied the spec on the belief
+    `cell` with its `setup`, traced unless `source` is "filter") satisfied the spec on the belief
     `source`, as the study's analysis judges a logged episode (docs/study.md, its item on
     satisfaction from the logs): "filter" the AV's own verdict; "true" each episode's driver's exact
     filter (`drivers`: the true models and each episode's index in them); "reference" the study's one
     filter for every condition (StudyContext.reference_filter; plan refuses a config's [drivers]);
     "reported" a point mass on the last report. The spec as written (belief atoms over trust) is
     read on the trust marginals."""
-    setup = context.setup(*cell)
     if is_own_verdict(source, context, setup, drivers[0]):
         return result.satisfied
     trace = result.trace

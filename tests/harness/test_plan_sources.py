@@ -83,7 +83,8 @@ def test_the_avs_own_model_judges_as_the_av(model_study):
         assert not is_own_verdict("true", context, setup, [twin])
         result = simulate_batch(setup, context.policies[cell], 4000, np.random.default_rng(1), trace=True,
                                 report_accuracy=0.8)
-        judged = source_satisfied("true", context, cell, result, ([twin], np.zeros(4000, dtype=np.int64)))
+        judged = source_satisfied("true", context, cell, setup, result,
+                                  ([twin], np.zeros(4000, dtype=np.int64)))
         np.testing.assert_array_equal(judged, result.satisfied)
 
 
