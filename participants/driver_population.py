@@ -226,9 +226,7 @@ def _model_file(file: str, base: Path | None, path: str, place: str) -> DriverMo
     """The driver model a type's `model_file` names. A file that cannot be read (missing, a
     directory, far too large) is an error of the population file at that key; what is wrong inside
     the model file is an error of the model file."""
-    relative = (base / file) if base is not None and not Path(file).is_absolute() else Path(file)
-    # the packaged-name rule (core/packaged.py): a file wins, else a bare name names a packaged model
-    model_path = relative if relative.is_file() else DRIVER_MODELS.path(file) or relative
+    model_path = DRIVER_MODELS.resolve(file, base)
     try:
         data = read_input_bytes(model_path, f"driver model {file[:80]!r}")
     except InputError as exc:

@@ -32,6 +32,21 @@ def test_the_packaged_names():
     assert TOWNS.path("nosuch") is None and TOWNS.resolve("nosuch").name == "nosuch"
 
 
+def test_a_base_folder_reads_relative_names_there(outside_the_repository):
+    """`resolve(value, base)`: a relative value is a file in `base` first, an absolute one is read
+    as it is, and a name with no such file is still the packaged file of that name."""
+    base = outside_the_repository / "sub"
+    base.mkdir()
+    (base / "driver_model.json").write_text("{}")
+    assert DRIVER_MODELS.resolve("driver_model.json", base) == base / "driver_model.json"
+    assert DRIVER_MODELS.resolve("driver_model.json") == DRIVER_MODELS.path("driver_model")
+    assert DRIVER_MODELS.resolve("driver_model_performance", base) == DRIVER_MODELS.path(
+        "driver_model_performance")
+    assert DRIVER_MODELS.resolve(base / "driver_model.json", outside_the_repository / "elsewhere") == (
+        base / "driver_model.json")
+    assert DRIVER_MODELS.resolve("gone.json", base) == base / "gone.json"
+
+
 GOOD = [
     ["synth", "phi1", "--horizon", "3", "--town", "town01_carla", "--driver", "driver_model",
      "--out", "p.json", "--json"],

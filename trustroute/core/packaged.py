@@ -56,12 +56,16 @@ class PackagedKind:
             return self.built[stem]()
         return self.folder / f"{stem}{self.suffix}" if stem in self.names() else None
 
-    def resolve(self, value: str | Path) -> Path:
+    def resolve(self, value: str | Path, base: Path | None = None) -> Path:
         """The file `value` names: an existing file, else the packaged file of that name, else
-        `value` unchanged (its reader then says it cannot be read, with `fix()`)."""
+        `value` unchanged (its reader then says it cannot be read, with `fix()`). `base`: the folder
+        a relative `value` is read in (a population's `model_file` is relative to the population
+        file's folder), else the current directory."""
         if str(value) == "":   # Path("") is the current directory
             raise InputError(self.what, "", f"the {self.what} name is empty", self.fix())
         path = Path(value)
+        if base is not None and not path.is_absolute():
+            path = base / path
         if path.is_file():
             return path
         return self.path(value) or path
