@@ -30,7 +30,7 @@ def export(study_dir: str, out: str, seed: int, as_json: bool) -> None:
 
     from trustroute.analysis.study_directory import load_study
     from trustroute.core.dataset import check_study_dir
-    from trustroute.harness.live.withdraw import ended_counts, registry_words
+    from trustroute.harness.live.withdraw import ended_counts, registry_records, registry_words
     from trustroute.harness.study.export import KEY_FILE, export_study
     from trustroute.harness.study.runner import held_study
 
@@ -40,9 +40,9 @@ def export(study_dir: str, out: str, seed: int, as_json: bool) -> None:
     with held_study(Path(study_dir), "wait for that run to finish (or stop it), then export again"):
         warnings = study_warnings(Path(study_dir))
         load_study(Path(study_dir))   # its tables checked against its inputs before anything is written
-        ended = ended_counts(Path(study_dir))
-        index = {**export_study(Path(study_dir), Path(out), np.random.default_rng(seed), ended,
-                               registry_words(Path(study_dir))),
+        records = registry_records(Path(study_dir))   # read once for its counts and its words
+        index = {**export_study(Path(study_dir), Path(out), np.random.default_rng(seed),
+                                ended_counts(records), registry_words(records)),
                  "warnings": warnings}
     # the package is a folder of many files, listed as the folder; the key stays in the study
     paths = {"package": Path(out), "export_key": Path(study_dir) / KEY_FILE}

@@ -113,22 +113,23 @@ def registry_records(study_dir: Path) -> list[dict] | None:
 ENDED = ("withdrawn", "declined")   # the registry's marks of a participant with no data
 
 
-def ended_counts(study_dir: Path) -> dict[str, int] | None:
+def ended_counts(records: list[dict] | None) -> dict[str, int] | None:
     """How many of a live study's participants are withdrawn (not readmitted) and how many declined
-    the consent (not asked again since), as its registry says: {"withdrawn": n, "declined": m}; None
-    for a study without a registry (a simulated one). `trustroute export` reports the counts."""
-    records = registry_records(study_dir)
+    the consent (not asked again since), as its registry's `records` say (`registry_records`):
+    {"withdrawn": n, "declined": m}; None for a study without a registry (a simulated one).
+    `trustroute export` reports the counts."""
     if records is None:
         return None
     return {ended: sum(1 for record in records if record.get(ended)) for ended in ENDED}
 
 
-def registry_words(study_dir: Path) -> list[tuple[str, str]]:
-    """The words of a live study's registry that name a participant, with what each is: every label
-    and token digest ([] for a study without a registry). `trustroute export` keeps them out of the
-    package's copied inputs (harness/study/export_inputs.py)."""
+def registry_words(records: list[dict] | None) -> list[tuple[str, str]]:
+    """The words of a live study's registry `records` (`registry_records`) that name a participant,
+    with what each is: every label and token digest ([] for a study without a registry).
+    `trustroute export` keeps them out of the package's copied inputs
+    (harness/study/export_inputs.py)."""
     kinds = (("label", "a participant's label"), ("digest", "a participant's token digest"))
-    return [(str(record[key]), what) for record in registry_records(study_dir) or []
+    return [(str(record[key]), what) for record in records or []
             for key, what in kinds if record.get(key)]
 
 
