@@ -78,13 +78,15 @@ class PackagedInputs:
     rewritten) and those left out (path, or config place of a task file not shipped, -> why);
     `record`: each input's relative path -> {"sha256", "source"} (the manifest's, or for a study
     that stored none, `shipped_task`'s), `named`: the config values naming the copies of such a
-    study's task files, `shipped`: whether the inputs are the installed package's files."""
+    study's task files, `shipped`: whether the inputs are the installed package's files, `mapped`:
+    the `path_map` of the full `record`, by which the copied files and the config are rewritten."""
     roles: dict[str, str] = field(default_factory=dict)
     rewritten: dict[str, str] = field(default_factory=dict)
     left_out: dict[str, str] = field(default_factory=dict)
     record: Record = field(default_factory=dict)
     named: dict[str, object] = field(default_factory=dict)
     shipped: bool = False
+    mapped: dict[str, str] = field(default_factory=dict)
 
 
 def input_roles(config: dict, recorded: list[str]) -> dict[str, str]:
@@ -202,9 +204,9 @@ def shipped_task(config: dict, packaged: PackagedInputs) -> dict[str, Path]:
                 packaged.left_out[f"config.{key}" + f"[{index}]" * many] = NOT_SHIPPED
                 values.append(config[key][index] if many else config.get(key))
                 continue
-            data = path.read_bytes()
-            relative = f"{content_folder(data)}/{path.name}"
-            packaged.record[relative] = {"sha256": hashlib.sha256(data).hexdigest(), "source": str(path)}
+            digest = hashlib.sha256(path.read_bytes()).hexdigest()
+            relative = f"{content_folder(digest)}/{path.name}"
+            packaged.record[relative] = {"sha256": digest, "source": str(path)}
             sources[relative] = path
             values.append(relative)
         packaged.named[key] = values if many else values[0]
@@ -235,7 +237,7 @@ def export_inputs(study_dir: Path, manifest: dict, out: Path, key: dict[int, int
         packaged.record = manifest["inputs"].get("files", {})
         sources = {relative: within(study_dir, relative) for relative in packaged.record}
     roles = input_roles({**config, **packaged.named}, list(packaged.record))
-    mapped, names = path_map(packaged.record), identifying_names(registry)
+    packaged.mapped, names = path_map(packaged.record), identifying_names(registry)
     for relative in sorted(packaged.record):
         path = sources[relative]
         if path is None:
@@ -250,7 +252,7 @@ def export_inputs(study_dir: Path, manifest: dict, out: Path, key: dict[int, int
             why = ("it is not UTF-8 text (nor a policy's decision table), so it cannot be read for "
                    "anything identifying")
         elif text is not None:
-            kept, said, why = cleaned(text, mapped, names, key)
+            kept, said, why = cleaned(text, packaged.mapped, names, key)
             if said is not None and relative.endswith(".gz"):
                 why = f"{said}, which a gzipped file is not rewritten for"
             elif said is not None:
@@ -268,9 +270,9 @@ def export_inputs(study_dir: Path, manifest: dict, out: Path, key: dict[int, int
 def config_text(config: dict, packaged: PackagedInputs) -> str:
     """The package's `study_config.json`: the config, naming the copies of the task files of a study
     that stored none, any absolute path in it (a study made before its inputs were stored) made
-    relative as in the copied files."""
+    relative as in the copied files (by `packaged.mapped`, which `export_inputs` sets)."""
     named = {**config, **packaged.named}
-    return rewritten_paths(json.dumps(named, indent=1, default=str), path_map(packaged.record))[0]
+    return rewritten_paths(json.dumps(named, indent=1, default=str), packaged.mapped)[0]
 
 
 def inputs_readme(packaged: PackagedInputs) -> list[str]:

@@ -60,22 +60,24 @@ def _sha256(path: Path) -> str:
 Record = dict[str, dict[str, str]]
 
 
-def content_folder(data: bytes) -> str:
-    """The folder a study stores an input of content `data` in, relative to the study directory:
-    inputs/<first 16 hex of its SHA-256> (the export lays out a package's inputs by it too)."""
-    return f"{INPUTS_DIR}/{hashlib.sha256(data).hexdigest()[:16]}"
+def content_folder(sha256: str) -> str:
+    """The folder a study stores an input whose content has the SHA-256 `sha256` (hex) in, relative
+    to the study directory: inputs/<its first 16 hex> (the export lays out a package's inputs by it
+    too). The callers record the digest as well, so they hash the content once."""
+    return f"{INPUTS_DIR}/{sha256[:16]}"
 
 
 def _write(study_dir: Path, record: Record, data: bytes, name: str, source: str,
            folder: Path | None = None) -> str:
     """Store `data` as `name` in `folder` (default: its `content_folder`); its relative path."""
-    folder = folder or study_dir / content_folder(data)
+    digest = hashlib.sha256(data).hexdigest()
+    folder = folder or study_dir / content_folder(digest)
     target = folder / name
     if not (target.is_file() and target.read_bytes() == data):
         folder.mkdir(parents=True, exist_ok=True)
         atomic_write_bytes(target, data, "study input copy", "free disk space in the study directory")
     relative = target.relative_to(study_dir).as_posix()
-    record[relative] = {"sha256": hashlib.sha256(data).hexdigest(), "source": source}
+    record[relative] = {"sha256": digest, "source": source}
     return relative
 
 
