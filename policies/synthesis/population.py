@@ -291,9 +291,10 @@ def within_tau(values: Iterable[TypeValue], bound: float, tau: float) -> bool:
 
 def run_end(run: SynthesisResult, cap: str | None = None) -> str:
     """What ended a run of the schedule, in work_clock.stopped_by's words: "convergence", "node
-    budget", `cap` (a trust-state synthesis' own, trust_state_synthesis.synthesis.reached_joint_cap)
-    or a belief-MDP synthesis' own cap (`belief_cap`), else its limit (one of LIMITS: which one is
-    the call's to name, from its clock)."""
+    budget", its own cap, else its limit (one of LIMITS: which one is the call's to name, from its
+    clock). The cap is `cap`, given by a caller that may hold a run of either kind (the answer of
+    trust_state_synthesis.synthesis.reached_cap, a layer above this one), else the belief-MDP
+    synthesis' own (`belief_cap`): this module's runs are of that kind alone."""
     own = cap if cap is not None else belief_cap(run.stats, run.lower, run.upper)
     return stopped_by(run.stats.converged, None, reached_node_budget(run.stats), own)
 

@@ -26,7 +26,7 @@ from trustroute.policies.routing.files import array_path, save_policy
 from trustroute.policies.routing.free import baseline_route, trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.synthesis.belief_synthesis import unbounded_schedule_note
-from trustroute.policies.synthesis.cluster_policy import CLUSTER_CAPS, belief_cap
+from trustroute.policies.synthesis.cluster_policy import CLUSTER_CAPS
 from trustroute.policies.synthesis.population import (
     Objective,
     PopulationSynthesis,
@@ -43,7 +43,7 @@ from trustroute.policies.synthesis.settings import CLUSTER_MODES as SEARCH_CLUST
 from trustroute.policies.synthesis.settings import SynthesisSettings as SearchSettings
 from trustroute.policies.synthesize_spec import synthesize_for_population, synthesize_problem
 from trustroute.policies.trust_state_synthesis.population import certified_type_values
-from trustroute.policies.trust_state_synthesis.synthesis import joint_cap_note, reached_joint_cap
+from trustroute.policies.trust_state_synthesis.synthesis import joint_cap_note, reached_cap
 from trustroute.policies.work_clock import CAPS, WorkClock, installed, stopped_by, work_clock
 
 
@@ -79,18 +79,10 @@ class SynthesisSettings(SearchSettings):
         super().__post_init__()
 
 
-def reached_cap(stats: object, lower: float, upper: float) -> str | None:
-    """The cap of a synthesis' own (work_clock.CAPS) whose bounds it returned (`lower`, `upper`),
-    if any: a trust-state synthesis says which (`reached_joint_cap`), a belief-MDP synthesis ends
-    at its cluster policies' largest cap or at its unbounded schedule's end (`belief_cap`)."""
-    return belief_cap(stats, lower, upper) or reached_joint_cap(stats)
-
-
 def run_stop(result: SynthesisResult, clock: WorkClock | None) -> str:
     """What ended one synthesis run (work_clock.stopped_by): its convergence, its search's node
-    budget, a cap of its own (`reached_cap`) or the limit of `clock`."""
-    return stopped_by(result.stats.converged, clock, reached_node_budget(result.stats),
-                      reached_cap(result.stats, result.lower, result.upper))
+    budget, a cap of its own (trust_state_synthesis.synthesis.reached_cap) or the limit of `clock`."""
+    return stopped_by(result.stats.converged, clock, reached_node_budget(result.stats), reached_cap(result))
 
 
 def synthesize_single(problem: Problem, settings: SynthesisSettings,
