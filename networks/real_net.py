@@ -32,6 +32,7 @@ from pathlib import Path
 from trustroute.core.errors import InputError
 from trustroute.networks.road import Road
 from trustroute.networks.road_geometry import check_sumo_net
+from trustroute.networks.sumo_import import read_sumo_net
 from trustroute.networks.town import Town
 
 PASSENGER = "passenger"
@@ -165,9 +166,8 @@ def road_edges(town: Town, net_file: Path) -> dict[str, RoadEdges]:
     found = _ROADS.get(key)
     if found is not None:
         return found
-    import sumolib
-
-    net = sumolib.net.readNet(str(net_file), withInternal=False)
+    net = read_sumo_net(net_file, fix="pass the town's own net (its `sumo_net`) or re-import the town "
+                        "with trustroute town import")
     out: dict[str, RoadEdges] = {}
     for road in town.states:
         other_way = town.geometry.get(Road.parse(road).reverse.id)

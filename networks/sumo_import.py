@@ -145,17 +145,27 @@ def require_net_file(net_path: str | Path, shown: str | None = None, fix: str = 
         raise InputError(shown or str(net_path), "", f"the SUMO net {what}", fix)
 
 
-def read_net_graph(net_path: str | Path, shown: str | None = None) -> NetGraph:
-    """The passenger graph of a SUMO `.net.xml` / `.net.xml.gz` read with sumolib."""
+READ_FIX = "pass an existing .net.xml(.gz) written by netconvert, or an .osm file"
+
+
+def read_sumo_net(net_path: str | Path, shown: str | None = None, fix: str = READ_FIX):
+    """The sumolib net of a `.net.xml` / `.net.xml.gz` (no internal edges), or an InputError naming
+    the file when it is missing or unreadable (sumolib would raise its URL opener's or XML parser's
+    error)."""
     import sumolib
 
     shown = shown or str(net_path)
-    require_net_file(net_path, shown, "pass an existing .net.xml(.gz) written by netconvert, or an .osm file")
+    require_net_file(net_path, shown, fix)
     try:
-        net = sumolib.net.readNet(str(net_path), withInternal=False)
+        return sumolib.net.readNet(str(net_path), withInternal=False)
     except Exception as exc:  # sumolib raises what its XML parser raises
-        raise InputError(shown, "", f"not a readable SUMO net ({type(exc).__name__}: {exc})",
-                         "pass a .net.xml(.gz) written by netconvert, or an .osm file") from None
+        raise InputError(shown, "", f"not a readable SUMO net ({type(exc).__name__}: {exc})", fix) from None
+
+
+def read_net_graph(net_path: str | Path, shown: str | None = None) -> NetGraph:
+    """The passenger graph of a SUMO `.net.xml` / `.net.xml.gz` read with sumolib."""
+    shown = shown or str(net_path)
+    net = read_sumo_net(net_path, shown)
     if not net.getNodes() and not net.getEdges(withInternal=False):
         # sumolib reads any XML without complaint: a route or additional file gives an empty net
         raise InputError(shown, "", "holds no SUMO net (no junction, no edge)",

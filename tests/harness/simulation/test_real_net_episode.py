@@ -337,3 +337,21 @@ def test_an_oncoming_truck_comes_only_from_lanes_open_to_trucks(tmp_path):
     trucks = incidents[(incidents["incident"] == "truck") & incidents["sumo_ids"].notna()]
     assert len(trucks) >= 1 and truck_lanes
     assert closed == set()
+
+
+def test_a_given_net_that_is_missing_or_unreadable_is_an_input_error(city, tmp_path):
+    """A net passed for an imported town (the API's `net`, the gym env's `net_path`) is checked
+    before sumolib reads it: a missing or broken file is an InputError naming it, not sumolib's
+    ValueError or XML parser error."""
+    town = load_town(city["town"])
+    model = load_driver_model(None)
+    spec = load_spec(str(city["spec"]), town)
+    policy = resolve_policy("free", town, model, spec, None)
+    setup = EpisodeSetup(town=town, driver_model=model, spec=spec)
+    broken = tmp_path / "broken.net.xml"
+    broken.write_text("<net><edge")
+    for net, words in ((tmp_path / "missing.net.xml", "does not exist"), (broken, "not a readable SUMO net")):
+        with pytest.raises(InputError, match=words) as raised:
+            run_episode(setup, policy, SyntheticDriver(model, np.random.default_rng(0)), "e0", 0,
+                        EpisodeOptions(net_path=net))
+        assert str(net) in str(raised.value)
