@@ -133,8 +133,6 @@ class TrustRoutingEnv(gymnasium.Env):
                  render_mode: str | None = None, population: DriverPopulation | str | Path | None = None,
                  **options: Any) -> None:
         settings = with_options(settings, EnvSettings(), options, "TrustRoutingEnv")
-        if population is not None and driver is not None:
-            raise ValueError("give driver or population, not both")
         if render_mode is not None:
             raise ValueError("TrustRouting has no render modes "
                              "(record a SUMO episode with trustroute run --rrd)")

@@ -259,8 +259,6 @@ def test_population_with_a_trust_state_spec_matches_exact_per_type_values(driver
     for (name, got), (value, _), weight in zip(ends.items(), per_type, population.weights, strict=True):
         assert abs(len(got) / episodes - weight) <= 4 * np.sqrt(weight * (1 - weight) / episodes), name
         assert abs(np.mean(got) - value) <= 4 * max(np.sqrt(value * (1 - value) / len(got)), 1e-12), name
-    with pytest.raises(ValueError, match="not both"):
-        TrustRoutingEnv(spec, town=town, driver=driver, population=population)
     env.close()
 
 
@@ -347,6 +345,17 @@ def test_a_bad_input_is_said_in_the_environments_keywords_not_the_cli_flags(argu
     with pytest.raises(InputError) as error:
         gymnasium.make(ENV_ID, spec="phi1", **{argument: value})
     assert said in str(error.value) and "--" not in str(error.value), error.value
+
+
+def test_a_driver_and_a_population_together_are_refused_as_the_api_refuses_them():
+    """The one check of the inputs (trustroute/app/inputs.py): an InputError naming `population`,
+    as `trustroute.run_episode(driver=..., population=...)` gives it, not a ValueError of its own."""
+    from trustroute.core.errors import InputError
+
+    with pytest.raises(InputError) as error:
+        gymnasium.make(ENV_ID, spec="phi1", driver="driver_model", population="driver_population_three_types")
+    assert str(error.value).startswith("population: a driver model and a driver population were both given")
+    assert "--" not in str(error.value), error.value
 
 
 def test_env_settings_read_the_shared_defaults():
