@@ -29,6 +29,7 @@ from gymnasium import spaces
 from trustroute.app.drivers import draw_type, gym_episode_id, synthetic_driver
 from trustroute.app.engines import SIMULATED, engine_named
 from trustroute.app.problem import load_problem
+from trustroute.app.synthesis import EvaluationSettings, evaluate_population, evaluate_single
 from trustroute.core import defaults
 from trustroute.core.errors import InputError, keyword_names
 from trustroute.core.fields import PROBABILITY, check_value
@@ -47,9 +48,10 @@ from trustroute.policies.routing.episode_rules import JUNCTION_CAPS
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 if TYPE_CHECKING:
-    from collections.abc import Mapping
+    from collections.abc import Callable, Hashable, Mapping
 
     from trustroute.harness.simulation.episode_record import EpisodeRecord
+    from trustroute.policies.evaluation.plain import Evaluation
     from trustroute.policies.model.trust_pomdp import BeliefRule
 
 ENV_ID = "trustroute/TrustRouting-v0"
@@ -100,6 +102,23 @@ class AgentPolicy(RoutingPolicy):
 
     def next_junction(self, context: DecisionContext) -> str:
         raise RuntimeError("the agent chooses the junction through TrustRoutingEnv.step")
+
+
+class ActingPolicy(RoutingPolicy):
+    """An agent of the environment (observation -> action) as a routing policy: at each decision
+    it is given the observation the environment gives there and its action is read as `step`
+    reads it. Made by `TrustRoutingEnv.agent_policy`."""
+
+    def __init__(self, env: TrustRoutingEnv, act: Callable[[dict], Any], name: str) -> None:
+        self._env, self._act, self.name = env, act, name
+
+    def next_junction(self, context: DecisionContext) -> str:
+        return self._env.junction_for(context.road, self._act(self._env.observation_at(context)))
+
+    def route_memory(self, route: tuple[str, ...]) -> Hashable:
+        # the observation holds the current road, the junctions driven, the DFA state and the
+        # belief, and nothing else of the route: histories equal in those are acted on alike
+        return ()
 
 
 class TrustRoutingEnv(gymnasium.Env):
@@ -200,6 +219,9 @@ class TrustRoutingEnv(gymnasium.Env):
     # -- observations ---------------------------------------------------------------------------
     def _observation(self, road: str, dfa_state: int, belief: np.ndarray, junctions: int) -> dict:
         self._road = road
+        return self._observed(road, dfa_state, belief, junctions)
+
+    def _observed(self, road: str, dfa_state: int, belief: np.ndarray, junctions: int) -> dict:
         return {
             "road": int(self.town.state_index(road)),
             "dfa_state": int(dfa_state),
@@ -215,7 +237,18 @@ class TrustRoutingEnv(gymnasium.Env):
 
     def _decision(self, context: DecisionContext) -> dict:
         self._belief = np.asarray(context.belief, dtype=np.float64)
-        return self._observation(context.road, context.dfa_state, context.belief, context.junctions_driven)
+        self._road = context.road
+        return self.observation_at(context)
+
+    def observation_at(self, context: DecisionContext) -> dict:
+        """The observation the environment gives at the decision point `context`."""
+        return self._observed(context.road, context.dfa_state, context.belief, context.junctions_driven)
+
+    def junction_for(self, road: str, action: object) -> str:
+        """The junction `step(action)` drives to from `road` (ValueError for an action not in the
+        action space)."""
+        legal = self._legal[road]
+        return legal[self._checked(action) % len(legal)]
 
     def _final_belief(self, last: Mapping[str, Any]) -> np.ndarray:
         """The AV's belief after the last road. The roads table logs a type-aware belief's trust
@@ -273,8 +306,7 @@ class TrustRoutingEnv(gymnasium.Env):
     def step(self, action: int) -> tuple[dict, float, bool, bool, dict]:
         if self._episode is None:
             raise RuntimeError("the episode is over (or never started): call reset()")
-        legal = self._legal[self._road]
-        junction = legal[self._checked(action) % len(legal)]
+        junction = self.junction_for(self._road, action)
         try:
             self._episode.choose(junction)
         except BaseException:
@@ -293,6 +325,26 @@ class TrustRoutingEnv(gymnasium.Env):
                              f"an integer from 0 to {self._width - 1} (info[\"action_mask\"] marks the "
                              "legal ones)")
         return int(action)  # type: ignore[call-overload]
+
+    # -- an agent as a routing policy -----------------------------------------------------------
+    def agent_policy(self, act: Callable[[dict], Any], name: str = "agent") -> RoutingPolicy:
+        """The agent `act` (an observation of this environment -> an action) as a routing policy:
+        `trustroute.run_episode(spec, policy, ...)` drives it (with the study's fallback and a
+        Rerun recording, `rrd=`) and `trustroute.evaluate` values it. `act` must be a
+        deterministic function of the observation."""
+        return ActingPolicy(self, act, name)
+
+    def evaluate_agent(self, act: Callable[[dict], Any]) -> Evaluation:
+        """The exact probability that the agent `act` (deterministic, observation -> action) is
+        rewarded in an episode of this environment, certified in [lower, upper]: its expected return,
+        by `trustroute.evaluate`'s unfolding with this environment's junction cap, belief rule and
+        no fallback (over the population's mixture of types when it has one)."""
+        settings = EvaluationSettings(fallback_after=None, max_junctions=self.setup.junction_cap,
+                                      belief_rule=self._belief_rule)
+        policy = self.agent_policy(act)
+        if self.population is not None:
+            return evaluate_population(self.problem, policy, settings)[0]
+        return evaluate_single(self.problem, policy, settings)
 
     def render(self) -> None:
         """Nothing: there are no render modes, and gymnasium's rule for `render_mode=None` is that no

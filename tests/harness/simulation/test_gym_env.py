@@ -14,13 +14,15 @@ from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.labelling import Labeller
 
 
-def random_agent_end_probabilities(env: TrustRoutingEnv) -> dict[str, float]:
-    """Exact P(accepted), P(rejected), P(cap) of the uniformly random agent (over the legal junctions).
+def random_agent_end_probabilities(env: TrustRoutingEnv, agent=None) -> dict[str, float]:
+    """Exact P(accepted), P(rejected), P(cap) of the uniformly random agent (over the legal junctions),
+    or of the deterministic `agent` (an observation dict -> an action, read modulo the legal count).
 
     Computed here, independently of the environment's episode loop, by pushing probability mass
     forward through the belief MDP of the product: nodes (road, DFA state, belief) are merged when
-    equal, each legal junction has probability 1/k, each observation h its probability
-    Σθ b(θ) P(h | θ, incident) under the Bayes belief (the exact posterior of the driver's trust).
+    equal, each legal junction has probability 1/k (or the agent's has 1), each observation h its
+    probability Σθ b(θ) P(h | θ, incident) under the Bayes belief (the exact posterior of the
+    driver's trust).
     """
     from trustroute.policies.model.trust_pomdp import build_pomdp
 
@@ -47,14 +49,21 @@ def random_agent_end_probabilities(env: TrustRoutingEnv) -> dict[str, float]:
             mass["cap"] += p.sum()
             break
         parts = []
+        if agent is not None:   # the agent's slot of each node, its move taken with probability 1
+            observations = ({"road": int(x), "dfa_state": int(d), "belief": b.copy(), "junctions": level}
+                            for x, d, b in zip(road, q, belief, strict=True))
+            chosen = np.array([agent(o) for o in observations], dtype=np.int64) % degree[road]
         for slot in range(successors.shape[1]):
             has = successors[road, slot] >= 0
+            if agent is not None:
+                has &= chosen == slot
             x2 = successors[road[has], slot]
+            share = p[has] / degree[road[has]] if agent is None else p[has]
             for h, e in outcomes:
                 post, p_obs = pomdp.belief_update(belief[has], pomdp.road_incident[x2], h, e)
                 ok = p_obs > 0
                 q2 = np.asarray(labeller.step(q[has][ok], x2[ok], post[ok]), dtype=np.int64)
-                parts.append((x2[ok], q2, post[ok], p[has][ok] / degree[road[has]][ok] * p_obs[ok]))
+                parts.append((x2[ok], q2, post[ok], share[ok] * p_obs[ok]))
         road, q, belief, p = (np.concatenate([part[i] for part in parts]) for i in range(4))
         keys = np.concatenate([road[:, None].astype(float), q[:, None].astype(float), belief], axis=1)
         unique, inverse = np.unique(keys, axis=0, return_inverse=True)
@@ -207,6 +216,53 @@ def test_random_agent_matches_exact_probabilities():
         se = max(np.sqrt(p * (1 - p) / episodes), 1e-12)
         assert abs(estimate - p) <= 4 * se, (reason, estimate, p, se)
     env.close()
+
+
+def belief_agent(observation) -> int:
+    """A deterministic agent that reads every part of the observation: the belief decides."""
+    trusting = observation["belief"][-2:].sum() > 0.6
+    return (observation["road"] + observation["dfa_state"] + observation["junctions"] + int(trusting)) % 2
+
+
+@pytest.mark.slow
+def test_an_agent_is_valued_exactly_as_the_environment_rewards_it():
+    """evaluate_agent (trustroute.evaluate's unfolding of the agent as a routing policy) gives the
+    agent's expected return: the forward propagation above computes it independently, and the
+    environment's own episodes agree with it."""
+    env = TrustRoutingEnv("phi1_strict", engine="model", junction_cap=10)
+    exact = random_agent_end_probabilities(env, belief_agent)["accepted"]
+    assert 0.05 < exact < 0.95   # the test has teeth
+    value = env.evaluate_agent(belief_agent)
+    assert value.lower <= exact + 1e-9 and exact - 1e-9 <= value.upper and value.upper - value.lower < 1e-9
+    assert env.evaluate_agent(lambda observation: 1 - belief_agent(observation)).lower != value.lower
+    episodes, rewards = 1000, 0.0
+    for i in range(episodes):
+        observation, info = env.reset(seed=3000 + i)
+        done = False
+        while not done:
+            observation, reward, terminated, truncated, info = env.step(belief_agent(observation))
+            done = terminated or truncated
+        rewards += reward
+    assert abs(rewards / episodes - exact) <= 4 * np.sqrt(exact * (1 - exact) / episodes)
+    env.close()
+
+
+def test_an_agent_as_a_routing_policy_drives_an_episode_as_step_does():
+    """agent_policy: each junction run_episode drives is the agent's action on the observation the
+    environment gives there (read off the episode's roads table), mapped as `step` maps it."""
+    import trustroute
+
+    env = TrustRoutingEnv("phi1_strict", engine="model")
+    agent = env.agent_policy(belief_agent)
+    roads = trustroute.run_episode("phi1_strict", agent, engine="model", seed=4).roads
+    decided = roads[~roads["fallback"]].iloc[:-1]
+    assert len(decided) > 3 and len(set(decided["action"])) > 1   # the test has teeth
+    for junctions, row in decided.iterrows():
+        observation = {"road": env.town.state_index(row["directed_road"]), "dfa_state": int(row["dfa_state"]),
+                       "belief": np.asarray(row["belief_after"]), "junctions": int(junctions)}
+        assert row["action"] == env.town.actions(row["directed_road"])[belief_agent(observation) % 2]
+    with pytest.raises(ValueError, match="not in the action space"):
+        env.junction_for("E-A", 2)
 
 
 class FirstJunction:
