@@ -190,8 +190,37 @@ class TrustRoutingEnv(gymnasium.Env):
         self.episodes = 0         # episodes started by reset()
         self._episode: SteppableEpisode | None = None   # the running episode, None once over
         self._road = ""
+        self._check_start()
 
     # -- the episode -----------------------------------------------------------------------------
+    def _driver(self, rng: np.random.Generator) -> SyntheticDriver:
+        """An episode's synthetic driver, of a type drawn from the population when there is one."""
+        model = self.driver_model
+        if self.population is not None:
+            self.driver_type, model = draw_type(self.population, rng)
+        return synthetic_driver(model, rng, report_accuracy=self.report_accuracy)
+
+    def _check_start(self) -> None:
+        """InputError when the spec is decided on its start road, so that no episode has a junction
+        to choose. The start position is read on the initial belief alone (the hidden trust of a
+        trust-state spec leaves its joint belief undecided there), so one model-engine episode
+        with any driver tells."""
+        from trustroute.harness.simulation.model_engine import ModelEpisode
+
+        probe = ModelEpisode(self.setup, AgentPolicy(), self._driver(np.random.default_rng(0)), "start", 0)
+        point = probe.advance()
+        self.driver_type = None
+        if not isinstance(point, DecisionPoint):
+            raise self._decided_at_start(point.record)
+        probe.close()
+
+    def _decided_at_start(self, record: EpisodeRecord) -> InputError:
+        spec = self.scldtl_spec
+        return InputError(spec.source_path or spec.name, "start",
+                          f"the spec is decided on its start road {spec.start} "
+                          f"({record.summary['end_reason']}): an episode has no junction to choose",
+                          "start the spec on a road where its formula is not yet decided")
+
     def _new_episode(self, driver: SyntheticDriver, episode_id: str, sumo_seed: int) -> SteppableEpisode:
         if not engine_named(self.engine).drives_sumo:
             from trustroute.harness.simulation.model_engine import ModelEpisode
@@ -289,18 +318,14 @@ class TrustRoutingEnv(gymnasium.Env):
         self._close_episode()
         rng = self.np_random
         sumo_seed = int(rng.integers(0, 2**31 - 1))
-        model = self.driver_model
-        if self.population is not None:
-            self.driver_type, model = draw_type(self.population, rng)
-        driver = synthetic_driver(model, rng, report_accuracy=self.report_accuracy)
+        driver = self._driver(rng)
         self.episodes += 1
         episode_id = gym_episode_id(self.scldtl_spec.name, self.episodes)
         self._episode = self._new_episode(driver, episode_id, sumo_seed)
         point = self._advance()
-        if not isinstance(point, DecisionPoint):
+        if not isinstance(point, DecisionPoint):   # refused when made (_check_start): not reached
             self._episode = None
-            raise ValueError(f"spec {self.scldtl_spec.name!r} is decided on its start road "
-                             f"({point.record.summary['end_reason']}): there is no junction to choose")
+            raise self._decided_at_start(point.record)
         return self._decision(point.context), self._info()
 
     def step(self, action: int) -> tuple[dict, float, bool, bool, dict]:

@@ -421,3 +421,19 @@ def test_env_settings_read_the_shared_defaults():
     settings = EnvSettings()
     assert (settings.engine, settings.belief_rule, settings.junction_cap) == (
         defaults.GYM_ENGINE, defaults.BELIEF_RULE, defaults.JUNCTION_CAP)
+
+
+@pytest.mark.parametrize("formula", ["F v1", "!v1 U v2"])
+def test_a_spec_decided_on_its_start_road_is_refused_when_made(tmp_path, formula):
+    """An episode with no junction to choose cannot give reset an observation: the spec is bad input
+    for the environment, one InputError naming its file when it is made, before any episode."""
+    from trustroute.core.errors import InputError
+
+    path = tmp_path / "decided.toml"
+    path.write_text(f'name = "decided"\nstart = "E-A"\nformula = "{formula}"\n\n'
+                    '[states]\nv1 = ["E-A"]\nv2 = ["A-F"]\n')
+    with pytest.raises(InputError) as error:
+        gymnasium.make(ENV_ID, spec=str(path))
+    said = str(error.value)
+    assert said.startswith(f"{path}: start: ") and "decided on its start road" in said, said
+    assert ("accepted" if formula.startswith("F") else "rejected") in said
