@@ -42,6 +42,13 @@ TRUCK_LENGTH = 12.0
 MAX_CLOSING = 30.0     # m/s: above the ego's 13.89 plus the truck's 11 (both at most at their limits)
 WATCH_HORIZON = 3.0    # s: above every head-on TTC limit (harness/simulation/performance.py)
 GONE_BEHIND = 60.0     # metres behind the ego after the meeting: the vehicle leaves the simulation
+# A head-on standstill: the ego, pulled out into the truck's lane (beside an obstacle it cannot
+# return behind), and the truck stand nose to nose before they met. SUMO drives no vehicle
+# backwards, so neither would ever move: after BACK_OFF_SECONDS the truck backs off (leaves the
+# simulation) and the ego drives on; the head-on TTC measured on the way in stays in its verdict.
+STANDING_SPEED = 0.1   # m/s: below this a vehicle stands
+NOSE_TO_NOSE = 20.0    # m between the two (their positions, not their fronts)
+BACK_OFF_SECONDS = 30.0
 
 
 TRUCK_TYPE = VehicleType(TYPE_ID, color=(120, 120, 255, 255), vehicle_class="truck", shape_class="truck",
@@ -73,6 +80,8 @@ class OncomingVehicle:
     _next_ttc_check: float = -math.inf
     _read_at: float = math.nan     # the sim time of the step `_where` was read in
     _where: tuple[float, float] | None = None
+    _standing_since: float = math.nan   # when the head-on standstill began (NaN: none)
+    backed_off: bool = False
 
     def insert(self, sumo: Sumo) -> None:
         sumo.vehicle.add(self.vehicle_id, self.route_id, typeID=TYPE_ID, depart="now",
@@ -120,6 +129,21 @@ class OncomingVehicle:
         # Met: the ego is no longer ahead of the truck along the truck's heading.
         if (ego.x - x) * math.sin(angle) + (ego.y - y) * math.cos(angle) <= 0:
             self.met_time, self.met_x, self.met_y = ego.time, x, y
+        else:
+            self._back_off_when_stuck(sumo, ego, math.dist((x, y), (ego.x, ego.y)))
+
+    def _back_off_when_stuck(self, sumo: Sumo, ego: EgoState, gap: float) -> None:
+        """The truck leaves once it and the ego have stood nose to nose for BACK_OFF_SECONDS
+        (its speed is read only while the ego stands close to it)."""
+        if ego.speed >= STANDING_SPEED or gap > NOSE_TO_NOSE or \
+                sumo.vehicle.getSpeed(self.vehicle_id) >= STANDING_SPEED:
+            self._standing_since = math.nan
+            return
+        if math.isnan(self._standing_since):
+            self._standing_since = ego.time
+        elif ego.time - self._standing_since >= BACK_OFF_SECONDS:
+            self.backed_off = True
+            self.remove(sumo)
 
     def _leave_when_behind(self, sumo: Sumo, ego: EgoState) -> None:
         """After the meeting the vehicle drives away behind the ego, where nothing the ego does
@@ -157,7 +181,8 @@ class OncomingVehicle:
 
     def details(self) -> str:
         return (f"oncoming={self.vehicle_id} meet_at={self.meet_at:.1f} meet_in={self.meet_in:.1f} "
-                f"met_time={self.met_time:.1f} from={self.road_before or self.road}")
+                f"met_time={self.met_time:.1f} from={self.road_before or self.road}"
+                + (" backed_off=yes" if self.backed_off else ""))
 
 
 TURNS = {"s": 0, "r": 1, "l": 1, "R": 2, "L": 2}   # SUMO link directions, straightest first (no U-turn)

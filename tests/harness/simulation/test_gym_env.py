@@ -437,3 +437,31 @@ def test_a_spec_decided_on_its_start_road_is_refused_when_made(tmp_path, formula
     said = str(error.value)
     assert said.startswith(f"{path}: start: ") and "decided on its start road" in said, said
     assert ("accepted" if formula.startswith("F") else "rejected") in said
+
+
+# An episode (phi1_trust, the three-type population, seed 1) whose 46th road is D-E with an unseen
+# oncoming truck: the ego, pulled out beside the obstacle, and the truck met nose to nose.
+HEAD_ON_ACTIONS = (1, 1, 0, 0, 0, 1, 0, 1, 1, 0, 0, 1, 0, 1, 1, 0, 1, 1, 1, 0, 0, 1, 1, 0, 1, 1, 1, 0,
+                   1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 0, 0, 0, 0, 0, 0, 0)
+
+
+@pytest.mark.slow
+def test_a_head_on_standstill_with_the_oncoming_truck_ends_with_the_truck_backing_off():
+    """Neither can move (SUMO drives no vehicle backwards): the truck backs off, out of the
+    simulation, and the episode goes on instead of standing until the sim-time cap."""
+    env = TrustRoutingEnv("phi1_trust", engine="sumo", population="driver_population_three_types")
+    _, info = env.reset(seed=1)
+    done = False
+    for action in (*HEAD_ON_ACTIONS, *[0] * env.setup.junction_cap):   # then on to the end
+        _, _, terminated, truncated, info = env.step(action)
+        if done := terminated or truncated:
+            break
+    assert done
+    incidents = env.last_record.incidents
+    roads = env.last_record.roads
+    backed = incidents[incidents["scene"].str.contains("backed_off=yes", na=False)]
+    assert backed["directed_road"].tolist() == ["D-E"], incidents[["directed_road", "scene"]]
+    assert backed["performance"].tolist() == ["fail"]
+    assert roads.loc[backed["index"].iloc[0], "directed_road"] == "D-E"
+    assert info["summary"]["sim_seconds"] < 1000
+    env.close()
