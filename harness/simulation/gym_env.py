@@ -143,6 +143,10 @@ class TrustRoutingEnv(gymnasium.Env):
 
     info is a function of the seed and the actions: the last step's info["summary"] leaves out the
     episode id and wall time (RUN_FACTS), which `last_run` holds with the episode counter.
+
+    `agent_policy(act)` turns an agent (observation -> action) into a routing policy that
+    `trustroute.run_episode` drives and records; `evaluate_agent(act)` is its exact expected return
+    (docs/gym_env.md, "An agent as a policy").
     """
 
     metadata = {"render_modes": []}
@@ -266,8 +270,7 @@ class TrustRoutingEnv(gymnasium.Env):
 
     def _decision(self, context: DecisionContext) -> dict:
         self._belief = np.asarray(context.belief, dtype=np.float64)
-        self._road = context.road
-        return self.observation_at(context)
+        return self._observation(context.road, context.dfa_state, context.belief, context.junctions_driven)
 
     def observation_at(self, context: DecisionContext) -> dict:
         """The observation the environment gives at the decision point `context`."""
