@@ -29,7 +29,12 @@ from gymnasium import spaces
 from trustroute.app.drivers import draw_type, gym_episode_id, synthetic_driver
 from trustroute.app.engines import SIMULATED, engine_named
 from trustroute.app.problem import load_problem
-from trustroute.app.synthesis import EvaluationSettings, evaluate_population, evaluate_single
+from trustroute.app.synthesis import (
+    EvaluationSettings,
+    check_evaluation,
+    evaluate_population,
+    evaluate_single,
+)
 from trustroute.core import defaults
 from trustroute.core.errors import InputError, keyword_names
 from trustroute.core.fields import PROBABILITY, check_value
@@ -362,13 +367,21 @@ class TrustRoutingEnv(gymnasium.Env):
         deterministic function of the observation."""
         return ActingPolicy(self, act, name)
 
-    def evaluate_agent(self, act: Callable[[dict], Any]) -> Evaluation:
+    def evaluate_agent(self, act: Callable[[dict], Any], *, max_nodes: int | None = None,
+                       time_limit: float | None = None) -> Evaluation:
         """The exact probability that the agent `act` (deterministic, observation -> action) is
         rewarded in an episode of this environment, certified in [lower, upper]: its expected return,
         by `trustroute.evaluate`'s unfolding with this environment's junction cap, belief rule and
-        no fallback (over the population's mixture of types when it has one)."""
-        settings = EvaluationSettings(fallback_after=None, max_junctions=self.setup.junction_cap,
-                                      belief_rule=self._belief_rule)
+        no fallback (over the population's mixture of types when it has one). max_nodes and
+        time_limit bound the unfolding as `trustroute.evaluate`'s do (fewer nodes or less time: a
+        wider bracket), under the same rules (an InputError naming the keyword)."""
+        try:
+            settings = EvaluationSettings(fallback_after=None, max_junctions=self.setup.junction_cap,
+                                          belief_rule=self._belief_rule, max_nodes=max_nodes,
+                                          time_limit=time_limit)
+            check_evaluation(self.problem, settings)
+        except InputError as error:   # said as the API says it: `max_nodes`, not --max-nodes
+            raise keyword_names(error) from None
         policy = self.agent_policy(act)
         if self.population is not None:
             return evaluate_population(self.problem, policy, settings)[0]

@@ -247,6 +247,24 @@ def test_an_agent_is_valued_exactly_as_the_environment_rewards_it():
     env.close()
 
 
+def test_an_agents_value_under_a_node_budget_brackets_its_exact_value():
+    """max_nodes bounds the unfolding as trustroute.evaluate's does: a wider certified bracket
+    around the exact value; a bad budget is an InputError naming the keyword."""
+    from trustroute.core.errors import InputError
+
+    env = TrustRoutingEnv("phi1_strict", engine="model", junction_cap=10)
+    exact = env.evaluate_agent(belief_agent)
+    budget = env.evaluate_agent(belief_agent, max_nodes=20)
+    assert exact.upper - exact.lower < 1e-9 and budget.upper - budget.lower > 0.01   # the budget bites
+    assert budget.lower <= exact.lower and exact.upper <= budget.upper
+    for bad in (0, "x"):
+        with pytest.raises(InputError) as error:
+            env.evaluate_agent(belief_agent, max_nodes=bad)
+        assert str(error.value).startswith("max_nodes: "), error.value
+    with pytest.raises(InputError, match="^time_limit: applies to specs with trust-state atoms only"):
+        env.evaluate_agent(belief_agent, time_limit=5)
+
+
 def test_an_agent_as_a_routing_policy_drives_an_episode_as_step_does():
     """agent_policy: each junction run_episode drives is the agent's action on the observation the
     environment gives there (read off the episode's roads table), mapped as `step` maps it."""
