@@ -56,6 +56,7 @@ from trustroute.analysis.belief_sources import (
     true_roads,
 )
 from trustroute.analysis.satisfaction import episode_satisfaction
+from trustroute.analysis.study.canonical import canonical_tables, in_rank_order
 from trustroute.analysis.study.cells import cell_table, takeover_table
 from trustroute.analysis.study.manual import manual_table, study_incidents
 from trustroute.analysis.study.order import order_tables, run_order
@@ -197,6 +198,11 @@ def study_analysis(study_dir: Path, belief_source: str | None = None,
             f"use one of {', '.join(BELIEF_SOURCES)}",
         )
     satisfaction = source_satisfaction(Path(study_dir), manifest, episodes, roads)
+    # from here on the participants' numbers are their ranks by content (canonical.py): the
+    # "true" source above needed their own numbers, which give each one's driver model
+    episodes, roads, rank_of_episode = canonical_tables(episodes, roads)
+    satisfaction = in_rank_order(satisfaction, rank_of_episode).assign(
+        participant=lambda frame: frame["episode_id"].map(rank_of_episode).astype("int64"))
     source_note = ""
     if f"satisfied_{belief_source}" not in satisfaction and not chosen:
         # a simulated study whose drivers this trustroute cannot rebuild: the reports are the
@@ -264,7 +270,8 @@ def study_analysis(study_dir: Path, belief_source: str | None = None,
         per_type=per_type,
         per_type_paired=per_type_paired,
         sensitivity=sensitivity,
-        manual=manual_table(study_incidents(Path(study_dir)), episodes, condition_order),
+        manual=manual_table(in_rank_order(study_incidents(Path(study_dir)), rank_of_episode), episodes,
+                            condition_order),
         source_note=source_note,
     )
     questionnaires = questionnaire_tables(Path(study_dir), episodes, pairs)

@@ -19,6 +19,8 @@ from statsmodels.stats.proportion import proportion_confint
 
 from tests.analysis.study.made_episodes import made_episodes
 from trustroute.analysis.statistics import keyed_rng
+from trustroute.analysis.study.canonical import participant_ranks
+from trustroute.core.dataset import read_episodes, read_roads
 
 SEED = 20240513
 RESAMPLES = 2000
@@ -287,6 +289,10 @@ def test_a_studys_cells_takeovers_and_order_tables_against_an_independent_comput
 
     analysis = study_analysis(model_study, "filter", resamples=RESAMPLES)
     episodes = pd.read_parquet(model_study / "episodes.parquet")
+    # the analysis' order of the rows: participants by the digest of their data (canonical.py)
+    ranks = participant_ranks(read_episodes(model_study), read_roads(model_study))
+    episodes = episodes.iloc[np.argsort(episodes["participant"].map(ranks).to_numpy(), kind="stable")]
+    episodes = episodes.reset_index(drop=True)
     satisfied = episodes["satisfied"].astype(bool)   # the filter source is the logged outcome
     for _, row in analysis.cells.iterrows():
         group = episodes[(episodes["spec"] == row["spec"]) & (episodes["condition"] == row["condition"])]
