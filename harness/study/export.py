@@ -54,6 +54,7 @@ from trustroute.core.dataset import (
 )
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text, check_output_dir
+from trustroute.core.package import PACKAGE_CONFIG_FILE, PACKAGE_TABLES_DIR
 from trustroute.core.validation import read_json
 from trustroute.harness.live.attempts import utc_now
 from trustroute.harness.study.config import LIVE_ENGINE
@@ -217,11 +218,11 @@ def export_study(study_dir: Path, out: Path, rng: np.random.Generator, ended: di
     times = {name: wall_clock_times(study_dir, name, table) for name, table in timed.items()}
     first = first_times(timed, times)
     imported = imported_episode_names(study_dir)
-    (out / "tables").mkdir(parents=True, exist_ok=True)
+    (out / PACKAGE_TABLES_DIR).mkdir(parents=True, exist_ok=True)
     for name in tables:
         table = timed[name] if name in timed else read_study_table(study_dir, name)
         write_table(exported_table(name, table, times.get(name, {}), key, first, people, imported),
-                    out / "tables" / TABLES[name][0])
+                    out / PACKAGE_TABLES_DIR / TABLES[name][0])
     book = {name: entries for name, entries in codebook(exported=True, people=people).items()
             if name in tables}
     atomic_write_text(out / "codebook.json", json.dumps(book, indent=1), "codebook")
@@ -229,7 +230,7 @@ def export_study(study_dir: Path, out: Path, rng: np.random.Generator, ended: di
     config = {setting: value for setting, value in manifest["config"].items()
               if not (people and setting in CONFIG_WITHOUT_PEOPLE_SEEDS)}
     packaged = export_inputs(study_dir, manifest, out, key, registry)
-    atomic_write_text(out / "study_config.json", config_text(config, packaged), "study config")
+    atomic_write_text(out / PACKAGE_CONFIG_FILE, config_text(config, packaged), "study config")
     versions = {"python": platform.python_version(), "git_revision": manifest.get("git_revision"),
                 "packages": manifest.get("packages", {}), "engine": manifest.get("engine")}
     atomic_write_text(out / "versions.json", json.dumps(versions, indent=1), "software versions")

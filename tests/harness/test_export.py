@@ -340,3 +340,15 @@ def test_a_task_file_the_package_does_not_ship_is_not_read(tmp_path, capsys):
                      r"package ships", (package / "README.md").read_text())
     assert not [p for p in package.rglob("*") if p.is_file() and b"the lab's own copy" in p.read_bytes()]
     assert_nothing_identifying(package, [str(tmp_path)])
+
+
+def test_a_package_passed_for_a_study_says_it_is_a_package(model_study, tmp_path, capsys):
+    code, _, err = run_cli(capsys, "export", str(model_study), "--out", str(tmp_path / "package"))
+    assert code == 0, err
+    package = str(tmp_path / "package")
+    for command in (["analyze", package], ["fit", package, "--out", str(tmp_path / "driver.json")],
+                    ["replay", package, "p100-phi1-aware"]):
+        code, out, err = run_cli(capsys, *command)
+        assert_one_line_error(code, err, str(tmp_path / "package"), "a package `trustroute export` wrote",
+                              "the study directory it was exported from", "tables/", "codebook.md")
+        assert out == "" and "trustroute study CONFIG" not in err

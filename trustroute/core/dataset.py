@@ -28,6 +28,7 @@ import pyarrow.parquet as pq
 
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_bytes
+from trustroute.core.package import package_fix
 from trustroute.core.validation import first_non_belief, read_input_bytes, read_json
 from trustroute.core.wording import shown_value
 
@@ -555,8 +556,7 @@ def read_questionnaires(study_dir: Path, columns: list[str] | None = None) -> pd
 
 
 def no_manifest_fix(study_dir: Path) -> str:
-    """How a study directory without a manifest gets one: a live study (its STUDY_FILE says so)
-    by serving it, as `trustroute study` refuses live configs; any other by running it."""
+    """The fix for a folder without a manifest, by what it holds (`trustroute study` refuses live ones)."""
     marker = study_dir / STUDY_FILE
     try:
         recorded = read_json(marker, "study marker") if marker.is_file() else {}
@@ -570,7 +570,8 @@ def no_manifest_fix(study_dir: Path) -> str:
         return ("a folder of logs is read once imported: "
                 f"`trustroute import carla-logs {study_dir} --out STUDY` (the authors' CARLA logs), "
                 "then pass STUDY")
-    return "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)"
+    return (package_fix(study_dir)   # an export's package, no study
+            or "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)")
 
 
 def check_study_dir(study_dir: Path) -> Path:
