@@ -29,3 +29,20 @@ def test_every_wall_clock_column_is_exported_as_seconds_with_an_entry():
             assert (entries[seconds]["type"], entries[seconds]["unit"]) == ("double", "s")
             assert "first recorded wall-clock time" in entries[seconds]["meaning"]
     assert all(entry["unit"] != UTC for entries in exported.values() for entry in entries)
+
+
+def test_a_packages_codebook_describes_its_codes_not_the_studys_numbers():
+    study, exported = codebook(), codebook(exported=True)
+    for table in TABLES:
+        ours = {entry["column"]: entry for entry in exported[table]}
+        theirs = {entry["column"]: entry for entry in study[table]}
+        if "participant" in ours:
+            code = ours["participant"]
+            assert "0-based" not in code["meaning"] and "pseudonym" in code["meaning"]
+            assert code["allowed"].startswith("codes of one width") and "100-999" in code["allowed"]
+            assert theirs["participant"]["allowed"] == "integers >= 0"
+        if "episode_id" in ours:
+            assert ours["episode_id"]["allowed"].startswith("p<participant code>-<spec>-<condition>")
+            assert "5 digits" not in ours["episode_id"]["allowed"]
+            assert ours["episode_id"]["meaning"] == theirs["episode_id"]["meaning"]   # each table's own
+            assert "5 digits" in theirs["episode_id"]["allowed"]

@@ -69,6 +69,13 @@ def test_a_package_says_nothing_of_the_order_of_enrolment(model_study, tmp_path,
     assert_no_wall_clock(tmp_path / "package")
     readme = (tmp_path / "package" / "README.md").read_text()
     assert "Participants: 12 planned, 12 with data in this package." in readme
+    # the codebook describes the codes the tables hold (100-999 for 12 participants), not the study's numbers
+    book = {entry["column"]: entry
+            for entry in json.loads((tmp_path / "package" / "codebook.json").read_text())["episodes"]}
+    assert "100-999" in book["participant"]["allowed"] and all(100 <= c <= 999 for c in codes)
+    assert book["episode_id"]["allowed"].startswith("p<participant code>-<spec>-<condition>")
+    ids = pq.read_table(tmp_path / "package" / "tables" / "episodes.parquet").column("episode_id").to_pylist()
+    assert all(re.fullmatch(r"p[1-9]\d\d-phi[12]-(aware|free)", episode) for episode in ids)
     assert "withdrawn" not in readme   # a simulated study has no withdrawals to report
     # nor texts shown to anyone: the README lists no `texts/` folder the package does not have
     assert not (tmp_path / "package" / "texts").exists() and "`texts/`" not in readme

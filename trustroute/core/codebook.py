@@ -164,6 +164,16 @@ SINCE_FIRST = ("in seconds since the participant's first recorded wall-clock tim
                "their attempts or submission of their questionnaires, which is 0)")
 
 
+# The ids of every table of an exported package, whose participants are pseudonyms (harness/study/
+# export.py `pseudonyms`): a package's reader finds codes, not the study's 0-based numbers.
+CODES = ("codes of one width drawn without replacement: 100-999 (more than 900 participants: 1000-9999; "
+         "more than 9,000: 10000-99999, and so on)")
+EXPORTED_IDS: dict[str, tuple[str | None, str]] = {   # column -> (meaning, None: the table's; allowed)
+    "participant": ("the participant's pseudonym, a random code", CODES),
+    "episode_id": (None, "p<participant code>-<spec>-<condition> (`p<code>-warmup` for a warm-up)"),
+}
+
+
 # Columns a package of a study with people leaves out, with the config keys that go with them: an
 # episode's seed is drawn from the study's seed and the participant's number (harness/study/plan.py),
 # so both together would give each pseudonym's number, the order of enrolment, back. A simulated
@@ -184,8 +194,13 @@ def exported_schema(table: str, people: bool = False) -> pa.Schema:
     return schema
 
 
-def entry_of(table: str, column: str) -> tuple[str, str, str]:
-    """(unit, meaning, allowed values) of a column of a study's or an exported package's table."""
+def entry_of(table: str, column: str, exported: bool = False) -> tuple[str, str, str]:
+    """(unit, meaning, allowed values) of a column of a study's or (`exported`) an exported package's
+    table."""
+    if exported and column in EXPORTED_IDS:
+        unit, meaning, _ = COLUMNS[table][column]
+        renamed, allowed = EXPORTED_IDS[column]
+        return unit, renamed or meaning, allowed
     if column in COLUMNS[table]:
         return COLUMNS[table][column]
     (source,) = [utc for utc, seconds in EXPORTED_TIMES[table].items() if seconds == column]
@@ -205,6 +220,7 @@ def codebook(exported: bool = False, people: bool = False) -> dict[str, list[dic
         fields = exported_schema(table, people) if exported else schema
         book[table] = [{"column": field.name, "file": file_name, "type": type_name(field.type),
                         "nullable": field.nullable, **dict(zip(("unit", "meaning", "allowed"),
-                                                              entry_of(table, field.name), strict=True))}
+                                                              entry_of(table, field.name, exported),
+                                                              strict=True))}
                        for field in fields]
     return book
