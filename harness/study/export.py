@@ -379,8 +379,10 @@ def readme(manifest: dict, tables: list[str], texts: list[str], participants: in
               "is the `item` of the questionnaires table, `reversed` items are scored as min + max - value)"
               if QUESTIONNAIRES_TEXT in texts else "") + "."] if texts else []),
         "- `SHA256SUMS`: the SHA-256 of every other file (`sha256sum -c SHA256SUMS`).", "",
-        "Participants are pseudonymous: each participant number is a random three-digit code, in the "
-        "`participant` column and in every `episode_id` (`p<code>-<spec>-<condition>`). Missing values "
+        "Participants are pseudonymous: each participant number is a random code (three digits; four "
+        "above 900 participants, and so on), in the `participant` column and in every `episode_id`, "
+        "written there with five digits (`p<code, 5 digits>-<spec>-<condition>`: code 114 is `p00114`). "
+        "Missing values "
         "are nulls. Rows are in the order of the codes (a participant's rows in the study's order), not "
         "of enrolment, and times of day are not given: each wall-clock time is the seconds since the "
         "participant's first recorded one (`codebook.md`).", ""])

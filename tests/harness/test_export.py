@@ -73,9 +73,11 @@ def test_a_package_says_nothing_of_the_order_of_enrolment(model_study, tmp_path,
     book = {entry["column"]: entry
             for entry in json.loads((tmp_path / "package" / "codebook.json").read_text())["episodes"]}
     assert "100-999" in book["participant"]["allowed"] and all(100 <= c <= 999 for c in codes)
-    assert book["episode_id"]["allowed"].startswith("p<participant code>-<spec>-<condition>")
+    assert "random code (three digits" in readme and "code 114 is `p00114`" in readme
+    assert book["episode_id"]["allowed"].startswith("p<participant code, 5 digits")
     ids = pq.read_table(tmp_path / "package" / "tables" / "episodes.parquet").column("episode_id").to_pylist()
-    assert all(re.fullmatch(r"p[1-9]\d\d-phi[12]-(aware|free)", episode) for episode in ids)
+    matches = [re.fullmatch(r"p00([1-9]\d\d)-phi[12]-(aware|free)", episode) for episode in ids]
+    assert {int(match.group(1)) for match in matches if match} == set(codes) and all(matches)
     assert "withdrawn" not in readme   # a simulated study has no withdrawals to report
     # nor texts shown to anyone: the README lists no `texts/` folder the package does not have
     assert not (tmp_path / "package" / "texts").exists() and "`texts/`" not in readme

@@ -170,7 +170,8 @@ CODES = ("codes of one width drawn without replacement: 100-999 (more than 900 p
          "more than 9,000: 10000-99999, and so on)")
 EXPORTED_IDS: dict[str, tuple[str | None, str]] = {   # column -> (meaning, None: the table's; allowed)
     "participant": ("the participant's pseudonym, a random code", CODES),
-    "episode_id": (None, "p<participant code>-<spec>-<condition> (`p<code>-warmup` for a warm-up)"),
+    "episode_id": (None, "p<participant code, 5 digits (code 114: p00114)>-<spec>-<condition> "
+                         "(`p<..>-warmup` for a warm-up)"),
 }
 
 
