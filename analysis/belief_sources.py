@@ -28,12 +28,20 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from trustroute.core.errors import InputError
+from trustroute.core.package import is_package
 from trustroute.harness.study.config import BELIEF_SOURCES as BELIEF_SOURCES  # the names, re-exported
 from trustroute.harness.study.config import StudyConfig
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.belief.observed import observed_beliefs
 
+# why a package has no "true" source when its drivers differ (a [population], a [drivers] population)
+PACKAGE_TRUE_SOURCE = ("each participant's own number to rebuild their driver's model, which the package's "
+                       "pseudonymous codes hide")
+# why a simulated study has none when this installation cannot rebuild its drivers
+UNBUILT_TRUE_SOURCE = ("the drivers' own models, which this installation cannot rebuild from the study's "
+                       "config")
 # engines whose drivers are simulated from models the study config names ("true" exists)
 SIMULATED_ENGINES: tuple[str, ...] = ("model", "sumo")
 # conditions whose AV filters with another model than the study's driver model
@@ -123,16 +131,22 @@ def refiltered(roads: pd.DataFrame, model: DriverModel, town: Town) -> pd.DataFr
     return roads.assign(belief_after=list(marginal))
 
 
-def true_roads(study_dir: Path, roads: pd.DataFrame, episodes: pd.DataFrame, nominal: DriverModel,
-               town: Town) -> pd.DataFrame:
-    """`roads` on the "true" source: each episode's roads filtered with its driver's true model."""
+def true_roads(study_dir: Path, manifest: dict, roads: pd.DataFrame, episodes: pd.DataFrame,
+               nominal: DriverModel, town: Town) -> pd.DataFrame:
+    """`roads` on the "true" source: each episode's roads filtered with its driver's true model.
+    InputError when the drivers cannot be rebuilt from `manifest`'s config, or (in a package
+    `trustroute export` wrote) each participant's model needs their number, which the package's
+    codes hide (`PACKAGE_TRUE_SOURCE`)."""
     from trustroute.harness.study.plan import participant_models
     from trustroute.harness.study.replay import study_config_from_manifest
 
-    config, _ = study_config_from_manifest(study_dir)
+    config, _ = study_config_from_manifest(study_dir, manifest)
     models = participant_models(config, nominal)
     if models is None:
         return refiltered(roads, nominal, town)
+    if is_package(study_dir):
+        raise InputError(str(study_dir), "", f"belief source 'true' needs {PACKAGE_TRUE_SOURCE}",
+                         "use filter, reported or reference")
     # one filter run per distinct model (the types' models are shared by their participants)
     distinct = {id(m): i for i, m in enumerate(models)}
     model_of = {p: distinct[id(m)] for p, m in enumerate(models)}

@@ -25,6 +25,7 @@ from trustroute.core.dataset import (
     read_roads,
 )
 from trustroute.core.errors import InputError
+from trustroute.core.package import table_path
 from trustroute.harness.study.context import load_study_inputs
 from trustroute.harness.study.inputs import MANIFEST_FIX, relocated_config, spec_path, verify_inputs
 from trustroute.networks.town import Town
@@ -32,13 +33,14 @@ from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
 
 
-def load_study(study_dir: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
+def load_study(study_dir: Path, package: bool = False) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     """(manifest, episodes, roads) of a consolidated study, read through trustroute.core.dataset;
     the manifest's config names the study directory's own copies of its inputs (absolute paths
     where the directory lies, harness/study/inputs.py), checked against their hashes, and the
-    tables are checked against those inputs (module docstring)."""
+    tables are checked against those inputs (module docstring). `package`: or of a package
+    `trustroute export` wrote, checked against its checksums (`read_manifest`)."""
     study_dir = Path(study_dir)
-    manifest = read_manifest(study_dir)
+    manifest = read_manifest(study_dir, package)
     verify_inputs(manifest, study_dir)
     manifest = {**manifest, "config": relocated_config(manifest.get("config") or {}, study_dir)}
     town, driver, specs = study_inputs(manifest, study_dir)
@@ -53,7 +55,7 @@ def check_logged_inputs(study_dir: Path, episodes: pd.DataFrame, roads: pd.DataF
     """The tables name only what the study's inputs have, or InputError naming the file, column and
     first row that does not: roads of the town, incidents of the driver model, specs of the study."""
     town, driver, specs = inputs
-    roads_file, episodes_file = str(Path(study_dir) / ROADS_FILE), str(Path(study_dir) / EPISODES_FILE)
+    roads_file, episodes_file = (str(table_path(study_dir, name)) for name in (ROADS_FILE, EPISODES_FILE))
     check_allowed(episodes["spec"], specs, episodes_file, "spec",
                   f"one of the study's specs ({', '.join(specs)})")
     check_allowed(roads["directed_road"], town.states, roads_file, "directed_road",

@@ -285,7 +285,7 @@ def run_study(config: StudyConfig | dict | PathLike, out: PathLike | None = None
 
 @_door
 def analyze(study_dir: PathLike, *, belief_source: str | None = defaults.BELIEF_SOURCE,
-            report: bool = defaults.REPORT_WITH_DATA) -> StudyAnalysis:
+            report: bool | None = None, out: PathLike | None = None) -> StudyAnalysis:
     """Per spec and condition of a study directory: n, satisfaction rate with its CI, mean trust,
     the policies' exact values, the paired tests of every pair of conditions with Holm-adjusted
     p-values, and every comparison on every belief source (`analysis.cells`, `analysis.paired`,
@@ -294,15 +294,14 @@ def analyze(study_dir: PathLike, *, belief_source: str | None = defaults.BELIEF_
     belief_source: the beliefs the specs are evaluated on ("true", "reported", "reference" or
     "filter"); None: the study's primary source, the same default as `trustroute analyze`
     (analysis/belief_sources.py `default_belief_source`). report: also write report.md,
-    report.html and the plots into the study directory; by default nothing is written, as with
-    `trustroute analyze --json` (the analysis is handed over as data; the command printing its
-    tables rewrites the report, trustroute/core/defaults.py `REPORT_WITH_DATA`).
+    report.html and the plots into `out` (default: the study directory); by default nothing is
+    written unless `out` is given, as with `trustroute analyze --json` (the analysis is handed over
+    as data; the command printing its tables rewrites the report, trustroute/core/defaults.py
+    `REPORT_WITH_DATA`). `study_dir` may be a package `trustroute export` wrote: its figures are the
+    study's, and its report is written only into `out` (trustroute/app/analysis.py).
     """
-    from trustroute.analysis.study.analysis import study_analysis
+    from trustroute.app.analysis import analyze_study, report_wanted
 
-    analysis = study_analysis(Path(study_dir), belief_source=belief_source)
-    if report:
-        from trustroute.analysis.study.report import write_report
-
-        write_report(Path(study_dir), analysis=analysis)
-    return analysis
+    folder = None if out is None else Path(out)
+    wanted = report_wanted(Path(study_dir), report, defaults.REPORT_WITH_DATA, folder)
+    return analyze_study(Path(study_dir), belief_source, wanted, folder).analysis

@@ -48,7 +48,9 @@ import pandas as pd
 
 from trustroute.analysis.belief_sources import (
     BELIEF_SOURCES,
+    PACKAGE_TRUE_SOURCE,
     SIMULATED_ENGINES,
+    UNBUILT_TRUE_SOURCE,
     declared_belief_source,
     default_belief_source,
     refiltered,
@@ -72,6 +74,7 @@ from trustroute.analysis.study.questionnaires import questionnaire_tables
 from trustroute.analysis.study.sensitivity import sensitivity_table
 from trustroute.analysis.study_directory import load_study, study_inputs
 from trustroute.core.errors import InputError
+from trustroute.core.package import is_package
 from trustroute.core.wording import shown_value
 from trustroute.harness.study.context import reference_model
 
@@ -106,7 +109,7 @@ class StudyAnalysis:
     questionnaire_tests: pd.DataFrame = field(default_factory=pd.DataFrame)   # live: paired tests
     sensitivity: pd.DataFrame = field(default_factory=pd.DataFrame)
     manual: pd.DataFrame = field(default_factory=pd.DataFrame)
-    source_note: str = ""   # why the leading source is not the default one, when it is not
+    source_note: str = ""   # why the leading source is not the default one, or a source is missing
 
     def to_dict(self) -> dict:
         return {
@@ -161,33 +164,38 @@ def json_records(frame: pd.DataFrame) -> list[dict]:
 
 
 def source_satisfaction(study_dir: Path, manifest: dict, episodes: pd.DataFrame,
-                        roads: pd.DataFrame) -> pd.DataFrame:
-    """Per episode: satisfied_<source> for every belief source the study has ("true" only for
-    simulated studies, whose config can rebuild each driver's true model)."""
+                        roads: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, str]]:
+    """(per episode: satisfied_<source> for every belief source the study has, {a source the study
+    has not: what it needs}): "true" only for simulated studies whose drivers can be rebuilt (from
+    their config; in a package, only when no driver's model depends on their number)."""
     town, driver, specs = study_inputs(manifest, study_dir)
     satisfaction = episodes[["episode_id", "participant", "spec", "condition"]].copy()
     reference = reference_model(manifest.get("config") or {}, driver)
     variants = {"filter": (roads, "filter"), "reported": (roads, "reported"),
                 "reference": (refiltered(roads, reference, town), "filter")}
+    missing = {}
     if manifest.get("engine") in SIMULATED_ENGINES:   # a person (live, imported logs) has no model
         try:
-            variants["true"] = (true_roads(study_dir, roads, episodes, driver, town), "filter")
-        except InputError:
-            pass  # a config this trustroute cannot rebuild: no "true" source (asking for it says so)
+            variants["true"] = (true_roads(study_dir, manifest, roads, episodes, driver, town), "filter")
+        except InputError:   # no "true" source: the note and asking for it say why
+            missing["true"] = PACKAGE_TRUE_SOURCE if is_package(study_dir) else UNBUILT_TRUE_SOURCE
+    else:
+        missing["true"] = (f"a simulated study (this one is {manifest.get('engine')}: its drivers are "
+                           "people, no model)")
     for source, (variant, evaluated) in variants.items():
         result = episode_satisfaction(variant, episodes, specs, town, driver.trust_levels, evaluated)
         mapped = dict(zip(result["episode_id"], result["satisfied"], strict=True))
         satisfaction[f"satisfied_{source}"] = (
             satisfaction["episode_id"].map(mapped).fillna(False).astype(bool)
         )
-    return satisfaction
+    return satisfaction, missing
 
 
 def study_analysis(study_dir: Path, belief_source: str | None = None,
                    resamples: int = 10_000) -> StudyAnalysis:
     """The analysis of `study_dir` on `belief_source` (default: `default_belief_source`, common to
     every condition)."""
-    manifest, episodes, roads = load_study(study_dir)
+    manifest, episodes, roads = load_study(study_dir, package=True)
     chosen = belief_source is not None or declared_belief_source(manifest) is not None
     belief_source = default_belief_source(manifest) if belief_source is None else belief_source
     if belief_source not in BELIEF_SOURCES:
@@ -197,7 +205,7 @@ def study_analysis(study_dir: Path, belief_source: str | None = None,
             f"unknown belief source {shown_value(belief_source)}",
             f"use one of {', '.join(BELIEF_SOURCES)}",
         )
-    satisfaction = source_satisfaction(Path(study_dir), manifest, episodes, roads)
+    satisfaction, missing = source_satisfaction(Path(study_dir), manifest, episodes, roads)
     # from here on the participants' numbers are their ranks by content (canonical.py): the
     # "true" source above needed their own numbers, which give each one's driver model
     episodes, roads, rank_of_episode = canonical_tables(episodes, roads)
@@ -205,17 +213,15 @@ def study_analysis(study_dir: Path, belief_source: str | None = None,
         participant=lambda frame: frame["episode_id"].map(rank_of_episode).astype("int64"))
     source_note = ""
     if f"satisfied_{belief_source}" not in satisfaction and not chosen:
-        # a simulated study whose drivers this trustroute cannot rebuild: the reports are the
-        # neutral source left
-        source_note = (f"the default source {belief_source!r} needs the drivers' own models, which this "
-                       "installation cannot rebuild from the study's config: 'reported' leads instead")
+        # a simulated study whose drivers cannot be rebuilt: the reports are the neutral source left
+        source_note = (f"the default source {belief_source!r} needs {missing[belief_source]}: 'reported' "
+                       "leads instead")
         belief_source = "reported"
+    elif manifest.get("engine") in SIMULATED_ENGINES and "true" in missing:   # said, not dropped
+        source_note = f"the source 'true' is not available: it needs {missing['true']}"
     if f"satisfied_{belief_source}" not in satisfaction:
-        why = ("the drivers' own models, which this installation cannot rebuild from the study's config"
-               if manifest.get("engine") in SIMULATED_ENGINES else
-               f"a simulated study (this one is {manifest.get('engine')}: its drivers are people, no model)")
-        raise InputError("--belief-source", "", f"belief source {belief_source!r} needs {why}",
-                         "use filter, reported or reference")
+        raise InputError("--belief-source", "", f"belief source {belief_source!r} needs "
+                         f"{missing[belief_source]}", "use filter, reported or reference")
     episodes = episodes.merge(
         satisfaction[["episode_id", *[c for c in satisfaction if c.startswith("satisfied_")]]],
         on="episode_id", how="left"

@@ -19,13 +19,14 @@ from trustroute.analysis.formatting import finite_or_none
 from trustroute.analysis.statistics import TOO_FEW, rate_interval
 from trustroute.analysis.study.design import fixed_order
 from trustroute.core.dataset import ATTEMPTS_FILE, read_attempts
+from trustroute.core.package import table_path
 from trustroute.harness.study.config import LIVE_ENGINE
 
 
 def run_order(study_dir: Path, manifest: dict, episodes: pd.DataFrame) -> pd.DataFrame:
     """`episodes` with `position` the place each was run at, for a live study with an attempts
     table (a done trial's `run_position`); any other study's episodes as they are."""
-    if manifest.get("engine") != LIVE_ENGINE or not (Path(study_dir) / ATTEMPTS_FILE).exists():
+    if manifest.get("engine") != LIVE_ENGINE or not table_path(study_dir, ATTEMPTS_FILE).exists():
         return episodes
     attempts = read_attempts(study_dir, ["episode_id", "run_position", "outcome"])
     done = attempts[(attempts["outcome"] == "done") & attempts["run_position"].notna()]

@@ -487,10 +487,10 @@ def takeover_plot(takeovers: pd.DataFrame, path: Path) -> Path:
 
 
 def write_plots(
-    study_dir: Path, town: Town, analysis, roads: pd.DataFrame, specs_by_name: dict
+    report_dir: Path, town: Town, analysis, roads: pd.DataFrame, specs_by_name: dict
 ) -> dict[str, Path]:
-    """Every plot of the report into `<study_dir>/plots/`, by name."""
-    folder = Path(study_dir) / PLOTS_DIR
+    """Every plot of the report into `<report_dir>/plots/`, by name."""
+    folder = Path(report_dir) / PLOTS_DIR
     folder.mkdir(parents=True, exist_ok=True)
     episodes = analysis.episodes
     plots = {

@@ -20,6 +20,7 @@ from trustroute.analysis.formatting import finite_or_none
 from trustroute.analysis.statistics import wilcoxon_paired
 from trustroute.analysis.study.paired import with_holm
 from trustroute.core.dataset import QUESTIONNAIRES_FILE, read_questionnaires
+from trustroute.core.package import table_path
 
 KEYS = ["participant", "episode_id", "placement", "questionnaire"]
 
@@ -50,7 +51,7 @@ def questionnaire_tables(study_dir: Path, episodes: pd.DataFrame,
                          pairs: list[tuple[str, str]]) -> tuple[pd.DataFrame, pd.DataFrame]:
     """(scores per questionnaire and condition, paired tests per questionnaire and pair of
     conditions); empty frames for a study without questionnaires."""
-    if not (Path(study_dir) / QUESTIONNAIRES_FILE).exists():
+    if not table_path(study_dir, QUESTIONNAIRES_FILE).exists():
         return pd.DataFrame(), pd.DataFrame()
     scored, matrices = responses(read_questionnaires(study_dir))
     if scored.empty:

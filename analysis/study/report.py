@@ -196,15 +196,19 @@ def _analysis_view(analysis: StudyAnalysis) -> dict:
     }
 
 
-def write_report(study_dir: Path, analysis: StudyAnalysis | None = None) -> ReportPaths:
-    """Analyse (unless given) and write report.md, report.html and plots/ in the study directory."""
+def write_report(study_dir: Path, analysis: StudyAnalysis | None = None,
+                 out: Path | None = None) -> ReportPaths:
+    """Analyse (unless given) and write report.md, report.html and plots/ in `out` (default: the
+    study directory)."""
     study_dir = Path(study_dir)
+    folder = study_dir if out is None else Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
     primary = analysis if analysis is not None else study_analysis(study_dir)
     default = default_belief_source(primary.manifest)
     secondary = study_analysis(study_dir, second_source(primary))
     town, _, specs = study_inputs(primary.manifest, study_dir)
     roads = read_roads(study_dir, ["episode_id", "index", "directed_road", "trust_after", "reported_trust"])
-    plots = write_plots(study_dir, town, primary, roads, specs)
+    plots = write_plots(folder, town, primary, roads, specs)
     failures = primary.manifest.get("failed_episodes", [])
     context = {
         "title": f"trustroute study report: {primary.manifest.get('study')}",
@@ -232,7 +236,7 @@ def write_report(study_dir: Path, analysis: StudyAnalysis | None = None) -> Repo
         "notes": NOTES,
     }
     environment = _environment()
-    markdown_path, html_path = study_dir / REPORT_MARKDOWN_FILE, study_dir / REPORT_HTML_FILE
+    markdown_path, html_path = folder / REPORT_MARKDOWN_FILE, folder / REPORT_HTML_FILE
     markdown_path.write_text(environment.get_template("report.md.j2").render(**context))
     html_path.write_text(environment.get_template("report.html.j2").render(**context))
     return ReportPaths(markdown=markdown_path, html=html_path, plots=plots, table_text=format_table(primary))

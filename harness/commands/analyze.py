@@ -33,38 +33,32 @@ from trustroute.harness.study.config import BELIEF_SOURCES
 @click.option(
     "--report/--no-report",
     default=None,
-    help="(Re)write report.md, report.html and plots/ in DIR (default: yes, but no with --json, "
-         "which hands the analysis over as data, as the Python API's analyze does).",
+    help="(Re)write report.md, report.html and plots/ in DIR, or in --out (default: yes, but no with "
+         "--json, which hands the analysis over as data, as the Python API's analyze does; for a "
+         "package, only with --out).",
 )
+@click.option("--out", type=click.Path(), default=None,
+              help="Folder for the report (default: DIR). A package `trustroute export` wrote is "
+                   "published read-only: its report is written only here.")
 def analyze(study_dir: str, as_json: bool, belief_source: str | None, wide: bool,
-            report: bool | None) -> None:
-    """Per spec and condition of the study directory DIR: n, satisfaction rate with CI, mean trust,
-    paired tests."""
-    from trustroute.analysis.study.analysis import study_analysis
-    from trustroute.core.dataset import CARLA_LOGS_ENGINE
+            report: bool | None, out: str | None) -> None:
+    """Per spec and condition of the study directory DIR, or of a package `trustroute export`
+    wrote: n, satisfaction rate with CI, mean trust, paired tests."""
+    from trustroute.app.analysis import analyze_study, report_wanted
+    from trustroute.core.output_files import check_output_dir
 
+    folder = None if out is None else check_output_dir(out, "--out", "report folder")
+    wanted = report_wanted(Path(study_dir), report,
+                           defaults.REPORT_WITH_DATA if as_json else defaults.REPORT_WITH_TABLES, folder)
     warnings = study_warnings(Path(study_dir))
-    analysis = study_analysis(Path(study_dir), belief_source=belief_source)
-    real = None
-    if analysis.manifest.get("engine") == CARLA_LOGS_ENGINE:
-        from trustroute.analysis.carla_study.analysis import real_study_analysis, write_real_study_report
-
-        real = real_study_analysis(Path(study_dir))
-    paths = None
-    real_paths: dict[str, Path] = {}
-    if report is None:
-        report = defaults.REPORT_WITH_DATA if as_json else defaults.REPORT_WITH_TABLES
-    if report:
-        from trustroute.analysis.study.report import write_report
-
-        paths = write_report(Path(study_dir), analysis=analysis)
-        if real is not None:
-            written = write_real_study_report(real, Path(study_dir))
-            real_paths = {"real_study_json": written, "real_study_text": written.with_suffix(".txt")}
+    result = analyze_study(Path(study_dir), belief_source, wanted, folder)
+    analysis, real, paths, real_paths = result.analysis, result.real, result.report, result.written
     if as_json:
         payload = {**analysis.to_dict(), "warnings": warnings}
         if real is not None:
             payload["real_study"] = real.to_dict()
+        elif result.real_note:
+            payload["real_study"] = {"note": result.real_note}
         payload = with_paths(payload, {**report_paths(paths), **real_paths} if paths is not None else {})
         click.echo(json.dumps(payload, default=str))
         return
@@ -78,5 +72,7 @@ def analyze(study_dir: str, as_json: bool, belief_source: str | None, wide: bool
 
         click.echo("")
         click.echo(format_real_study(real, width))
+    elif result.real_note:
+        click.echo(f"\nReal study: {result.real_note}.")
     if paths is not None:
         click.echo(f"report: {paths.markdown} and {paths.html}")

@@ -75,9 +75,11 @@ def study_warnings(study_dir: Path) -> list[str]:
     manifest without the hash of its config (harness/study/inputs.py, `unchecked_config`, which
     the replay says too)."""
     from trustroute.core.dataset import read_manifest
+    from trustroute.core.package import is_package
     from trustroute.harness.study.inputs import unchecked_config
 
-    line = unchecked_config(read_manifest(study_dir), study_dir)
+    # a package's manifest always records its config's hash (harness/study/export.py)
+    line = None if is_package(study_dir) else unchecked_config(read_manifest(study_dir), study_dir)
     warnings = [] if line is None else [line]
     for warning in warnings:
         warn(warning)

@@ -26,7 +26,6 @@ declined and did not take part: counts adding up to the planned).
 
 from __future__ import annotations
 
-import hashlib
 import json
 import platform
 import re
@@ -46,6 +45,7 @@ from trustroute.core.codebook import (
 )
 from trustroute.core.dataset import (
     MANIFEST_FILE,
+    MANIFEST_KEYS,
     REBUILD_FIX,
     TABLES,
     read_manifest,
@@ -54,12 +54,18 @@ from trustroute.core.dataset import (
 )
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text, check_output_dir
-from trustroute.core.package import PACKAGE_CONFIG_FILE, PACKAGE_TABLES_DIR
+from trustroute.core.package import (
+    PACKAGE_CONFIG_FILE,
+    PACKAGE_MANIFEST_FILE,
+    PACKAGE_TABLES_DIR,
+    SUMS_FILE,
+    sha256_of,
+)
 from trustroute.core.validation import read_json
 from trustroute.harness.live.attempts import utc_now
 from trustroute.harness.study.config import LIVE_ENGINE
 from trustroute.harness.study.export_inputs import PackagedInputs, config_text, export_inputs, inputs_readme
-from trustroute.harness.study.inputs import relocated_config
+from trustroute.harness.study.inputs import INPUTS_DIR, config_sha256, relocated_config
 from trustroute.participants.questionnaires import Questionnaire, questionnaire_plan
 
 KEY_FILE = "export-key.json"
@@ -176,22 +182,48 @@ def pseudonymised(table: pa.Table, key: dict[int, int],
         table = table.set_column(index, table.schema.field(index), pa.array(values, pa.int64()))
     if "episode_id" in names:
         index = names.index("episode_id")
-
-        def renamed(episode: str | None) -> str | None:
-            if episode in imported:
-                participant, tail = imported[episode]
-                return f"p{key[participant]:05d}-{tail}"
-            if episode is None or (match := EPISODE_PARTICIPANT.match(episode)) is None:
-                return episode
-            return f"p{key[int(match.group(1))]:05d}-{episode[match.end():]}"
-
-        ids = [renamed(e) for e in table.column(index).to_pylist()]
+        ids = [renamed_episode(e, key, imported) for e in table.column(index).to_pylist()]
         table = table.set_column(index, table.schema.field(index), pa.array(ids, pa.string()))
     return table
 
 
-def sha256_of(path: Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+def renamed_episode(episode: str | None, key: dict[int, int],
+                    imported: dict[str, tuple[int, str]] | None = None) -> str | None:
+    """The episode id under the pseudonyms of `key` (`imported`: `imported_episode_names`); an id
+    that names no participant stays as it is. KeyError for a participant `key` has no code for."""
+    imported = imported or {}
+    if episode in imported:
+        participant, tail = imported[episode]
+        return f"p{key[participant]:05d}-{tail}"
+    if episode is None or (match := EPISODE_PARTICIPANT.match(episode)) is None:
+        return episode
+    return f"p{key[int(match.group(1))]:05d}-{episode[match.end():]}"
+
+
+def package_manifest(manifest: dict, config: dict, packaged: PackagedInputs, key: dict[int, int],
+                     tables: list[str], out: Path) -> dict:
+    """The package's manifest (PACKAGE_MANIFEST_FILE): the study manifest's keys, as far as they
+    are neither personal nor the lab's (docs/dataset.md, "The manifest"): `config` is the package's
+    (`study_config.json`'s), `inputs` records the package's copies in `out`, `files` its tables, a failed
+    episode's id is pseudonymised (null for a participant with no data, who has no code) and its
+    error left out (a traceback names the lab's files); when and how the study was run
+    (`created_utc`, `command`) and the seeds (the `seed` column where the package gives them) are
+    null."""
+    failed = []
+    for failure in manifest.get("failed_episodes") or []:
+        try:
+            episode = renamed_episode(failure.get("episode_id"), key)
+        except KeyError:
+            episode = None
+        failed.append({"episode_id": episode, "error": None, "attempts": failure.get("attempts")})
+    record = {path: {"sha256": sha256_of(Path(out) / path)} for path in packaged.roles}
+    package = {
+        **manifest, "config_path": PACKAGE_CONFIG_FILE, "config": config, "created_utc": None,
+        "command": None, "failed_episodes": failed, "seeds": None,
+        "files": {name: f"{PACKAGE_TABLES_DIR}/{TABLES[name][0]}" for name in tables},
+        "inputs": {"dir": INPUTS_DIR, "files": record, "config_sha256": config_sha256(config)},
+    }
+    return {name: package[name] for name in MANIFEST_KEYS}
 
 
 def export_study(study_dir: Path, out: Path, rng: np.random.Generator, ended: dict[str, int] | None,
@@ -230,7 +262,11 @@ def export_study(study_dir: Path, out: Path, rng: np.random.Generator, ended: di
     config = {setting: value for setting, value in manifest["config"].items()
               if not (people and setting in CONFIG_WITHOUT_PEOPLE_SEEDS)}
     packaged = export_inputs(study_dir, manifest, out, key, registry)
-    atomic_write_text(out / PACKAGE_CONFIG_FILE, config_text(config, packaged), "study config")
+    package_config = config_text(config, packaged)
+    atomic_write_text(out / PACKAGE_CONFIG_FILE, package_config, "study config")
+    atomic_write_text(out / PACKAGE_MANIFEST_FILE,
+                      json.dumps(package_manifest(manifest, json.loads(package_config), packaged, key, tables,
+                                                  out), indent=1), "package manifest")
     versions = {"python": platform.python_version(), "git_revision": manifest.get("git_revision"),
                 "packages": manifest.get("packages", {}), "engine": manifest.get("engine")}
     atomic_write_text(out / "versions.json", json.dumps(versions, indent=1), "software versions")
@@ -248,7 +284,7 @@ def export_study(study_dir: Path, out: Path, rng: np.random.Generator, ended: di
     write_export_keys(study_dir, earlier, out, key)
     files = sorted(path for path in out.rglob("*") if path.is_file())
     sums = "".join(f"{sha256_of(path)}  {path.relative_to(out)}\n" for path in files)
-    atomic_write_text(out / "SHA256SUMS", sums, "checksums")
+    atomic_write_text(out / SUMS_FILE, sums, "checksums")
     return {"tables": tables, "texts": texts, "inputs": list(packaged.roles),
             "inputs_left_out": packaged.left_out, "participants": len(key), "files": len(files) + 1}
 
@@ -372,6 +408,10 @@ def readme(manifest: dict, tables: list[str], texts: list[str], participants: in
         "- `codebook.md`, `codebook.json`: every column's type, whether it may be null, unit, meaning and "
         "allowed values.",
         "- `study_config.json`: the study's configuration; `versions.json`: the software that made it.",
+        f"- `{PACKAGE_MANIFEST_FILE}`: the study's manifest (the keys of docs/dataset.md, \"The "
+        "manifest\") as far as it is neither personal nor the lab's: the design (`config`), the planned, "
+        "finished and failed episodes, each spec's and condition's certified policy values "
+        "(`expected`); what the analysis reads beside the tables.",
         *inputs_readme(packaged),
         *(["- `texts/`: what participants were shown (" + ", ".join(texts) + ")"
            + (f"; `{QUESTIONNAIRES_TEXT}`: per placement (`before`, `after_each_trial`, `end`) each "
@@ -385,4 +425,7 @@ def readme(manifest: dict, tables: list[str], texts: list[str], participants: in
         "Missing values "
         "are nulls. Rows are in the order of the codes (a participant's rows in the study's order), not "
         "of enrolment, and times of day are not given: each wall-clock time is the seconds since the "
-        "participant's first recorded one (`codebook.md`).", ""])
+        "participant's first recorded one (`codebook.md`).", "",
+        "To re-run the analysis: `trustroute analyze PACKAGE --json` (PACKAGE: this folder), which checks "
+        "every file against `SHA256SUMS` and gives the study's own figures; add `--out DIR` for the "
+        "report, written there (nothing is written into the package).", ""])

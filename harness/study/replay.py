@@ -67,13 +67,14 @@ class Replay:
     warnings: tuple[str, ...] = ()   # what the replay could not check (one line each)
 
 
-def study_config_from_manifest(study_dir: Path) -> tuple[StudyConfig, dict]:
-    """The StudyConfig a study was run with (from manifest.json), and the manifest."""
+def study_config_from_manifest(study_dir: Path, manifest: dict | None = None) -> tuple[StudyConfig, dict]:
+    """The StudyConfig a study was run with (from manifest.json, or `manifest` as read), and the
+    manifest."""
     from trustroute.core.dataset import CARLA_LOGS_ENGINE, read_manifest
     from trustroute.harness.study.inputs import relocated_config
 
     path = Path(study_dir) / MANIFEST_FILE
-    manifest = read_manifest(Path(study_dir))
+    manifest = read_manifest(Path(study_dir)) if manifest is None else manifest
     if manifest.get("engine") == CARLA_LOGS_ENGINE:   # no config: people drove it, in CARLA
         raise InputError(str(path), "engine",
                          "a study imported from CARLA logs has no study config to re-run it with",

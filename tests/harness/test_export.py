@@ -355,7 +355,7 @@ def test_a_package_passed_for_a_study_says_it_is_a_package(model_study, tmp_path
     code, _, err = run_cli(capsys, "export", str(model_study), "--out", str(tmp_path / "package"))
     assert code == 0, err
     package = str(tmp_path / "package")
-    for command in (["analyze", package], ["fit", package, "--out", str(tmp_path / "driver.json")],
+    for command in (["fit", package, "--out", str(tmp_path / "driver.json")],
                     ["replay", package, "p100-phi1-aware"]):
         code, out, err = run_cli(capsys, *command)
         assert_one_line_error(code, err, str(tmp_path / "package"), "a package `trustroute export` wrote",

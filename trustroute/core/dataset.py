@@ -26,9 +26,9 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
+from trustroute.core import package as packages
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_bytes
-from trustroute.core.package import package_fix
 from trustroute.core.validation import first_non_belief, read_input_bytes, read_json
 from trustroute.core.wording import shown_value
 
@@ -464,11 +464,10 @@ def check_values(table: pa.Table, name: str, source: str,
 def _check_episode_rows(study_dir: Path, table: pa.Table, source: str) -> None:
     """Every row's episode id is one of episodes.parquet (when the directory has one: `trustroute
     run --out` writes one episode's tables without it)."""
-    if not (Path(study_dir) / EPISODES_FILE).exists():
+    if not packages.table_path(study_dir, EPISODES_FILE).exists():
         return
-    file_name, schema = TABLES["episodes"]
     # the ids only: the episodes' own values are checked where the episodes are read
-    known = read_table(Path(study_dir) / file_name, schema, ["episode_id"],
+    known = read_table(packages.table_path(study_dir, EPISODES_FILE), TABLES["episodes"][1], ["episode_id"],
                        ADDED_COLUMNS.get("episodes", ())).column(0).combine_chunks()
     ids = table.column("episode_id").to_pandas()
     check_allowed(ids, known.to_pylist(), source, "episode_id", f"an episode of {EPISODES_FILE}")
@@ -501,9 +500,8 @@ def read_study_table(study_dir: Path, name: str, columns: list[str] | None = Non
     """The table `name` (a key of TABLES) of a study directory: the one reader of a study's tables,
     checking the file against its schema (`read_table`), its values (`check_values`; trust levels
     given: those of the study's driver model) and that its rows belong to the study's episodes."""
-    file_name, schema = TABLES[name]
-    path = Path(study_dir) / file_name
-    table = read_table(path, schema, None, ADDED_COLUMNS.get(name, ()))
+    path = packages.table_path(study_dir, TABLES[name][0])
+    table = read_table(path, TABLES[name][1], None, ADDED_COLUMNS.get(name, ()))
     check_values(table, name, str(path), trust_levels)
     if name in EPISODE_ROWS:
         _check_episode_rows(study_dir, table, str(path))
@@ -535,7 +533,8 @@ def read_kinematics(study_dir: Path, columns: list[str] | None = None) -> pd.Dat
 def read_incidents_table(study_dir: Path, columns: list[str] | None = None) -> pa.Table:
     """incidents.parquet (SUMO engine), checked (`read_study_table`); an empty table when the
     study had no incident objects and no takeovers (the file is then not written)."""
-    if not (Path(study_dir) / INCIDENTS_FILE).exists() and (Path(study_dir) / MANIFEST_FILE).exists():
+    dataset = (Path(study_dir) / MANIFEST_FILE).exists() or packages.is_package(study_dir)
+    if dataset and not packages.table_path(study_dir, INCIDENTS_FILE).exists():
         return INCIDENTS_SCHEMA.empty_table().select(columns or INCIDENTS_SCHEMA.names)
     return read_study_table(study_dir, "incidents", columns)
 
@@ -570,7 +569,7 @@ def no_manifest_fix(study_dir: Path) -> str:
         return ("a folder of logs is read once imported: "
                 f"`trustroute import carla-logs {study_dir} --out STUDY` (the authors' CARLA logs), "
                 "then pass STUDY")
-    return (package_fix(study_dir)   # an export's package, no study
+    return (packages.package_fix(study_dir)   # an export's package, no study
             or "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)")
 
 
@@ -588,13 +587,14 @@ def check_study_dir(study_dir: Path) -> Path:
     return path
 
 
-def read_manifest(study_dir: Path) -> dict:
-    """manifest.json of a consolidated study, with every key of MANIFEST_KEYS."""
-    path = check_study_dir(study_dir)
-    manifest = read_json(path, "study manifest", fix=REBUILD_FIX)
+def read_manifest(study_dir: Path, package: bool = False) -> dict:
+    """manifest.json of a study, every key of MANIFEST_KEYS; `package`: or a package's, checked."""
+    packaged = package and packages.verify_package(study_dir)   # True once its checksums match
+    path = Path(study_dir) / packages.PACKAGE_MANIFEST_FILE if packaged else check_study_dir(study_dir)
+    fix = packages.TAMPERED_FIX if packaged else REBUILD_FIX
+    manifest = read_json(path, "study manifest", fix=fix)
     missing = ([key for key in MANIFEST_KEYS if key not in manifest and key not in MANIFEST_OPTIONAL_KEYS]
                if isinstance(manifest, dict) else ["all"])
     if missing or not isinstance(manifest, dict):   # not a dict: missing is ["all"]
-        raise InputError(str(path), missing[0], "missing manifest key",
-                         REBUILD_FIX)
+        raise InputError(str(path), missing[0], "missing manifest key", fix)
     return manifest

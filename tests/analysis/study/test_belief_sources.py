@@ -129,7 +129,7 @@ def test_true_source_filters_with_each_drivers_type(robust_study):
     manifest, episodes, roads = load_study(robust_study)
     town, driver, _ = study_inputs(manifest, robust_study)
     population = load_driver_population(EXAMPLE_POPULATION_PATH)
-    true = true_roads(robust_study, roads, episodes, driver, town)
+    true = true_roads(robust_study, manifest, roads, episodes, driver, town)
     for type_name in episodes["driver_type"].unique():
         ids = set(episodes[episodes["driver_type"] == type_name]["episode_id"])
         model = population.types[list(population.names).index(type_name)].model

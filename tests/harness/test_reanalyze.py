@@ -1,0 +1,96 @@
+"""`trustroute analyze` on a package `trustroute export` wrote: the study's own `--json` figures,
+bit for bit, under the package's codes; nothing written into the package; a tampered package
+refused; a source the package cannot give said, with why."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from tests.cli import assert_one_line_error, run_cli
+
+PATHS = ("study_dir", "report_markdown", "report_html", "plots")
+
+
+def analysed(capsys, folder: Path, *options: str) -> dict:
+    code, out, err = run_cli(capsys, "analyze", str(folder), "--json", *options)
+    assert code == 0, err
+    return json.loads(out)
+
+
+def exported(capsys, study: Path, package: Path) -> Path:
+    code, _, err = run_cli(capsys, "export", str(study), "--out", str(package))
+    assert code == 0, err
+    return package
+
+
+def files_of(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_a_package_gives_the_study_s_figures_and_stays_as_published(model_study, tmp_path, capsys):
+    package = exported(capsys, model_study, tmp_path / "package")
+    published = files_of(package)
+    study, packaged = analysed(capsys, model_study), analysed(capsys, package)
+    assert packaged["study_dir"] == str(package)
+    assert {k: v for k, v in packaged.items() if k not in PATHS} == {
+        k: v for k, v in study.items() if k not in PATHS}
+    assert study["cells"] and study["paired"] and study["sensitivity"]   # figures, not empty tables
+    code, _, err = run_cli(capsys, "analyze", str(package))   # printing the tables writes nothing
+    assert code == 0, err
+    assert files_of(package) == published
+    check = subprocess.run(["sha256sum", "-c", "--quiet", "SHA256SUMS"], cwd=package, capture_output=True)
+    assert check.returncode == 0, check.stdout
+
+
+def test_a_package_s_report_goes_only_where_the_user_names(model_study, tmp_path, capsys):
+    package = exported(capsys, model_study, tmp_path / "package")
+    published = files_of(package)
+    code, out, err = run_cli(capsys, "analyze", str(package), "--report")
+    assert_one_line_error(code, err, str(package), "--out", "read-only")
+    code, out, err = run_cli(capsys, "analyze", str(package), "--out", str(tmp_path / "report"))
+    assert code == 0, err
+    assert (tmp_path / "report" / "report.md").is_file() and (tmp_path / "report" / "plots").is_dir()
+    assert files_of(package) == published
+
+
+def test_a_tampered_package_is_refused_naming_the_file(model_study, tmp_path, capsys):
+    package = exported(capsys, model_study, tmp_path / "package")
+    roads = package / "tables" / "roads.parquet"
+    roads.write_bytes(roads.read_bytes() + b"\0")
+    code, out, err = run_cli(capsys, "analyze", str(package), "--json")
+    assert_one_line_error(code, err, str(roads), "SHA256SUMS")
+    assert out == ""
+
+
+@pytest.mark.slow
+def test_true_source_of_drivers_by_number_is_said_not_available(pilot_study, tmp_path, capsys):
+    study = pilot_study(5)   # a [population]: each participant's driver sampled by their number
+    package = exported(capsys, study, tmp_path / "package")
+    on_study, on_package = (analysed(capsys, folder, "--belief-source", "reported")
+                            for folder in (study, package))
+    assert "true" in {row["source"] for row in on_study["sensitivity"]}
+    assert "true" not in {row["source"] for row in on_package["sensitivity"]}
+    assert "pseudonymous codes hide" in on_package["belief_source_note"]
+    assert on_study["belief_source_note"] == ""
+    kept = {k for k in on_study if k not in (*PATHS, "sensitivity", "belief_source_note")}
+    assert {k: on_package[k] for k in kept} == {k: on_study[k] for k in kept}
+    assert on_package["sensitivity"] == [r for r in on_study["sensitivity"] if r["source"] != "true"]
+    default = analysed(capsys, package)
+    assert default["belief_source"] == "reported" and "'true'" in default["belief_source_note"]
+    code, _, err = run_cli(capsys, "analyze", str(package), "--json", "--belief-source", "true")
+    assert_one_line_error(code, err, "--belief-source", "pseudonymous codes hide")
+
+
+def test_a_package_without_a_manifest_is_refused(model_study, tmp_path, capsys):
+    package = exported(capsys, model_study, tmp_path / "package")
+    shutil.copytree(package, tmp_path / "old")
+    sums = tmp_path / "old" / "SHA256SUMS"
+    sums.write_text("".join(line + "\n" for line in sums.read_text().splitlines()
+                            if not line.endswith("study_manifest.json")))
+    code, _, err = run_cli(capsys, "analyze", str(tmp_path / "old"), "--json")
+    assert_one_line_error(code, err, "study_manifest.json", "export the study again")
