@@ -71,8 +71,8 @@ RUN_FACTS = ("episode_id", "wall_seconds")
 @dataclass(frozen=True)
 class EnvSettings:
     """How the environment's episodes run. engine: "model" (fast, no SUMO) or "sumo" (libsumo).
-    junction_cap: the episode is truncated after this many junctions. belief_rule: the AV's filter
-    ("bayes" or "paper"). report_accuracy: the synthetic driver's trust-report accuracy (reports
+    junction_cap: the episode ends after this many junctions (the task's horizon). belief_rule: the
+    AV's filter ("bayes" or "paper"). report_accuracy: the synthetic driver's trust-report accuracy (reports
     are logged only). net_path: the SUMO net (None: the town's). Every field is checked here, by
     the rules a study config's keys of the same names follow; a bad one is an InputError naming it."""
 
@@ -315,10 +315,14 @@ class TrustRoutingEnv(gymnasium.Env):
                                         self._final_belief(last), int(summary["junctions"]))
         reason = summary["end_reason"]
         info = {**self._info(), "end_reason": reason, "summary": summary}
-        terminated = reason in ("accepted", "rejected")
         # The episode's own reading of the spec: the DFA's acceptance, and for a spec that tests
         # the hidden trust the true DFA state's (an episode the AV cannot settle ends at the cap).
-        return observation, float(bool(summary["satisfied"])), terminated, reason == "cap", info
+        # The cap is the task's horizon, not a limit outside it: the reward certified values speak
+        # of is for acceptance within it, a spec on the hidden trust is read there, and the
+        # observation counts the junctions. So every end is `terminated` (gymnasium's rule for a
+        # limit the agent sees); a bootstrapping learner would otherwise add a value after the
+        # cap that the task does not have.
+        return observation, float(bool(summary["satisfied"])), True, False, info
 
     # -- the gymnasium API ----------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:

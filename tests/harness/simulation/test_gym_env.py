@@ -183,7 +183,10 @@ def test_ends_rewards_and_masks_follow_the_tracker():
             done = terminated or truncated
             assert reward == (1.0 if terminated and info.get("end_reason") == "accepted" else 0.0)
         assert observation["junctions"] == steps == env.last_record.summary["junctions"]
-        assert truncated == (info["end_reason"] == "cap") == (steps == 6 and not terminated)
+        # the cap is the task's horizon: every end terminates, the cap's too (docs/gym_env.md)
+        assert terminated and not truncated
+        decided = info["end_reason"] in ("accepted", "rejected")
+        assert (info["end_reason"] == "cap") == (steps == 6 and not decided)
         roads = env.last_record.roads   # the tracker's log: each action is the next road's end junction
         assert list(roads["action"].iloc[:-1]) == [r.split("-")[1] for r in roads["directed_road"].iloc[1:]]
         seen.add(info["end_reason"])
@@ -483,3 +486,19 @@ def test_a_head_on_standstill_with_the_oncoming_truck_ends_with_the_truck_backin
     assert roads.loc[backed["index"].iloc[0], "directed_road"] == "D-E"
     assert info["summary"]["sim_seconds"] < 1000
     env.close()
+
+
+def test_a_reward_read_at_the_cap_ends_the_task_there():
+    """A spec on the hidden trust is read at the cap: an episode rewarded there is terminated, not
+    truncated, as is every episode the cap ends (the cap is the task's horizon, docs/gym_env.md)."""
+    env = TrustRoutingEnv("phi1_trust", engine="model", junction_cap=8)
+    rng = np.random.default_rng(11)
+    rewarded_at_cap = 0
+    for seed in range(30):
+        env.reset(seed=seed)
+        terminated = truncated = False
+        while not (terminated or truncated):
+            _, reward, terminated, truncated, info = env.step(int(rng.integers(0, env.action_space.n)))
+        assert terminated and not truncated, info["end_reason"]
+        rewarded_at_cap += info["end_reason"] == "cap" and reward == 1.0
+    assert rewarded_at_cap > 0   # the case the rule is for occurred
