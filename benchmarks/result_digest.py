@@ -159,6 +159,22 @@ def digest(work: Path, only: list[str]) -> dict:
     return results
 
 
+def read_digest(path: Path) -> dict:
+    """A digest this module wrote; a file that is not one ends the command with one line (exit 2)."""
+    try:
+        results = json.loads(path.read_text())
+        problem = "" if isinstance(results, dict) else "not a digest (an object of entries)"
+    except OSError as error:
+        problem = str(error.strerror)
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        problem = "not JSON"
+    if problem:
+        fix = "give a file `python -m benchmarks.result_digest OUT.json` wrote"
+        print(InputError(str(path), "", problem, fix).one_line(), file=sys.stderr)
+        raise SystemExit(2)
+    return results
+
+
 def main(argv: list[str]) -> None:
     parser = argparse.ArgumentParser(
         prog="python -m benchmarks.result_digest",
@@ -172,7 +188,7 @@ def main(argv: list[str]) -> None:
     if len(args.paths) > 2:
         parser.error("give OUT.json, or A.json B.json")
     if len(args.paths) == 2:
-        a, b = (json.loads(Path(p).read_text()) for p in args.paths)
+        a, b = (read_digest(Path(p)) for p in args.paths)
         keys = sorted((set(a) & set(b)) if args.only == ["common"] else (set(a) | set(b)))
         differing = [k for k in keys if a.get(k) != b.get(k)]
         print("identical" if not differing else f"differ: {differing}")

@@ -44,3 +44,17 @@ def test_a_digest_run_leaves_the_callers_cache_root_as_it_was(monkeypatch, capsy
     monkeypatch.setattr(result_digest, "digest", lambda work, only: {})
     result_digest.main([str(tmp_path / "out.json"), "--only", ENTRY])
     assert os.environ.get("XDG_CACHE_HOME") == before
+
+
+@pytest.mark.parametrize("text", [None, "{not json", "[1]"])
+def test_comparing_a_file_that_is_no_digest_is_one_line_and_exit_2(tmp_path, capsys, text):
+    good, bad = tmp_path / "good.json", tmp_path / "bad.json"
+    good.write_text("{}\n")
+    if text is not None:
+        bad.write_text(text)
+    with pytest.raises(SystemExit) as stopped:
+        result_digest.main([str(bad), str(good)])
+    assert stopped.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    assert str(bad) in err and "fix:" in err
