@@ -100,6 +100,23 @@ policy_cache = "{cache}"
 
 
 @pytest.fixture(scope="session")
+def model_report(model_study) -> dict:
+    """The JSON of `trustroute analyze MODEL_STUDY --json --report`, run once per session (it must
+    succeed). Its report (report.md, report.html, plots/) is written into the model study, where the
+    report, paired-table and plot tests read it: each of them would otherwise write the same report
+    again, its plots most of an analysis' time. No other test writes a report there."""
+    import json
+
+    from click.testing import CliRunner
+
+    from trustroute.harness.cli import cli
+
+    result = CliRunner().invoke(cli, ["analyze", str(model_study), "--json", "--report"])
+    assert result.exit_code == 0, (result.stderr, result.exception)
+    return json.loads(result.stdout)
+
+
+@pytest.fixture(scope="session")
 def pilot_study(model_study, tmp_path_factory):
     """make(seed, participants=8, extra=""): a finished model-engine pilot study (aware vs free on
     φ1 and φ2, the model study's policy cache) whose drivers report their exact trust on every road

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import re
 
 import pandas as pd
@@ -14,10 +13,8 @@ from trustroute.analysis.study.display import TABLE_TITLES
 
 
 @pytest.mark.slow
-def test_analyze_json_and_self_contained_report(model_study, capsys):
-    code, out, err = run_cli(capsys, "analyze", str(model_study), "--json", "--report")
-    assert code == 0, err
-    payload = json.loads(out)
+def test_analyze_json_and_self_contained_report(model_study, model_report):
+    payload = model_report
     assert payload["belief_source"] == "true"
     assert payload["paths"] == {"report_markdown": str(model_study / "report.md"),
                                 "report_html": str(model_study / "report.html"),
