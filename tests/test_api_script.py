@@ -40,11 +40,19 @@ SPAWNED = ("import multiprocessing, runpy, sys\n"
            "runpy.run_path(sys.argv[1], run_name='__main__')\n")
 
 
+def script_environment(folder: Path, cache: Path) -> dict[str, str]:
+    """A script's environment: its home in `folder`, its cache the run's temporary root (tests/
+    conftest.py, `temporary_cache`), never the real ~/.cache. The nets and policies a script makes
+    are those other tests make (the packaged town's net, its policies at a study's default
+    horizon): read there, they are not built again in each script's process."""
+    return {**os.environ, "HOME": str(folder / "home"), "XDG_CACHE_HOME": str(cache)}
+
+
 @pytest.mark.slow
-def test_readme_api_script_runs(tmp_path):
+def test_readme_api_script_runs(tmp_path, temporary_cache):
     script = tmp_path / "api_script.py"
     script.write_text(api_script())
-    env = {**os.environ, "HOME": str(tmp_path / "home"), "XDG_CACHE_HOME": str(tmp_path / "home" / ".cache")}
+    env = script_environment(tmp_path, temporary_cache)
     done = subprocess.run([sys.executable, "-c", SPAWNED, str(script)], cwd=tmp_path, env=env,
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
@@ -89,12 +97,12 @@ trustroute.run_study({"study": {"participants": 4, "seed": 1, "engine": "model",
 
 
 @pytest.mark.slow
-def test_a_script_without_a_main_guard_stops_with_the_fix_on_spawned_workers(tmp_path):
+def test_a_script_without_a_main_guard_stops_with_the_fix_on_spawned_workers(tmp_path, temporary_cache):
     """Each spawned worker runs the unguarded script again and exits while it starts; the study
     stops with one line saying why instead of spawning a worker per task (or blocking on one)."""
     script = tmp_path / "unguarded.py"
     script.write_text(UNGUARDED)
-    env = {**os.environ, "HOME": str(tmp_path / "home"), "XDG_CACHE_HOME": str(tmp_path / "home" / ".cache")}
+    env = script_environment(tmp_path, temporary_cache)
     done = subprocess.run([sys.executable, "-c", SPAWNED, str(script)], cwd=tmp_path, env=env,
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 1
