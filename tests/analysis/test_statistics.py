@@ -137,12 +137,13 @@ def test_keyed_generators_depend_on_the_seed_and_key_alone():
     assert keyed_rng(8, *key).random(3).tolist() != first
     assert keyed_rng(7, *key[:3], "robust").random(3).tolist() != first
     assert keyed_rng(7, "trust difference", "phi1aware", "free").random(3).tolist() != first
+    # one other process, whose str hashes differ from this one's (checked: else it proves nothing)
     code = ("from trustroute.analysis.statistics import keyed_rng; "
-            f"print(keyed_rng(7, *{key!r}).random(3).tolist())")
-    for hash_seed in ("1", "2"):
-        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                             env={**os.environ, "PYTHONHASHSEED": hash_seed}).stdout
-        assert out.strip() == repr(first)
+            f"print(keyed_rng(7, *{key!r}).random(3).tolist()); print(hash({key[0]!r}))")
+    hash_seed = "2" if os.environ.get("PYTHONHASHSEED") == "1" else "1"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         env={**os.environ, "PYTHONHASHSEED": hash_seed}).stdout.splitlines()
+    assert out[0] == repr(first) and int(out[1]) != hash(key[0])
 
 
 def test_wilcoxon_all_equal_and_nan_pairs():
