@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import gc
 import os
+import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -11,6 +13,7 @@ from hypothesis import settings
 
 from tests.harness.helpers import run_study
 from tests.suite import CACHE_ENV, LEDGER_ENV
+from trustroute.core.output_files import file_lock
 from trustroute.networks.sumo_net import build_net
 from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
@@ -57,6 +60,21 @@ def temporary_cache(tmp_path_factory):
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv("XDG_CACHE_HOME", str(root))
         yield root
+
+
+def shared_fixture(cache: Path, name: str, build: Callable[[Path], None]) -> Path:
+    """The folder `name` in the run's cache root (`temporary_cache`), filled by `build(folder)` once
+    per run by whichever pytest-xdist worker asks first: a module's tests may be shared out to both
+    workers, and a fixture that runs a whole study would run it on each. The others wait on the
+    folder's lock, then read what it built; a build cut short (no `.built` mark) is built again."""
+    folder = cache / "test-fixtures" / name
+    with file_lock(folder.with_name(f"{name}.lock"), f"test fixture {name}", wait=True):
+        if not (folder / ".built").exists():
+            shutil.rmtree(folder, ignore_errors=True)
+            folder.mkdir(parents=True)
+            build(folder)
+            (folder / ".built").touch()
+    return folder
 
 
 @pytest.fixture(scope="session")

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from tests.cli import cli_json
+from tests.conftest import shared_fixture
 from tests.robust_study_config import robust_study_text
 from trustroute.analysis.study.analysis import study_analysis
 from trustroute.harness.study.config import BELIEF_SOURCES, load_study_config
@@ -23,14 +24,18 @@ from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH, l
 STUDY_PARTICIPANTS, PLANNED_PARTICIPANTS = 240, 1200
 
 
-@pytest.fixture(scope="module")
-def configs(tmp_path_factory):
-    """(the config a plan reads, a study of that config with the types as its drivers)."""
-    root = tmp_path_factory.mktemp("plan_sources")
+def _build(root):
     (root / "plan.toml").write_text(robust_study_text(root, STUDY_PARTICIPANTS, drivers=False))
     (root / "study.toml").write_text(robust_study_text(root, STUDY_PARTICIPANTS))
     run_and_consolidate(load_study_config(root / "study.toml"), root / "out", 1, None, progress=False,
                         echo=lambda *_: None)
+
+
+@pytest.fixture(scope="module")
+def configs(temporary_cache):
+    """(the config a plan reads, a study of that config with the types as its drivers): built once
+    per run (tests/conftest.py, `shared_fixture`), only read by the tests."""
+    root = shared_fixture(temporary_cache, "plan-sources", _build)
     return root / "plan.toml", root / "out"
 
 

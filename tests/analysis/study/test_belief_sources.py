@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from tests.conftest import shared_fixture
 from tests.robust_study_config import robust_study_text
 from trustroute.analysis.belief_sources import (
     default_belief_source,
@@ -29,13 +30,17 @@ from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH, l
 from trustroute.policies.belief.driver_types import TypeLiftedModel
 
 
-@pytest.fixture(scope="module")
-def robust_study(tmp_path_factory):
-    root = tmp_path_factory.mktemp("robust_study")
+def _build(root):
     path = root / "study.toml"
     path.write_text(robust_study_text(root, 6))
     run_and_consolidate(load_study_config(path), root / "out", 1, None, progress=False, echo=lambda *_: None)
-    return root / "out"
+
+
+@pytest.fixture(scope="module")
+def robust_study(temporary_cache):
+    """Built once per run (tests/conftest.py, `shared_fixture`); of its tests, only the report
+    heading's writes into it (its report), and no other test reads the report."""
+    return shared_fixture(temporary_cache, "belief-sources", _build) / "out"
 
 
 @pytest.fixture(scope="module")
