@@ -76,15 +76,28 @@ function report(value) {
   $("prompt").classList.add("hidden");
 }
 
-let handBackDue = false;   // warned: the ego waits for the hand-back; the warning stays up until it
+// The hand-back is due: warned, or by wheel the car held for it (a hold's warning, or each frame's
+// `held`: a takeover after the commit point is held with no warning to hand back, and a page
+// opened mid-hold saw none). The ego waits for the hand-back, so it is said until it comes, over
+// every other notice (a device asked for, an incident, the road's end) but what must be done first:
+// a one-off notice, written over by the next, left a person held with nothing telling them why.
+let handBackDue = false;
+const HAND_BACK_DUE = "Hand back before the junction (space): the vehicle waits for you.";
+let dueText = HAND_BACK_DUE;   // the words it is said in: a hold's own where its warning came
 
 // what the person must do first, shown even while the hand-back is due (which it would not answer)
-const FIRST = new Set(["back_to_lane", "guide_back", "held_off_lane"]);
-
-const HAND_BACK_DUE = "Hand back before the junction (space): the vehicle waits for you.";
+const FIRST = new Set(["back_to_lane", "guide_back"]);
+// the warnings of a car held for the hand-back (harness/simulation/wheel_driving.py `Wheel.held`)
+const HELD = new Set(["hold", "held_off_lane", "stopped_off_road"]);
 
 function notice(text, first = false) {
-  setText($("incident"), handBackDue && !first ? HAND_BACK_DUE : text);
+  setText($("incident"), handBackDue && !first ? dueText : text);
+}
+
+function handBackNow(text = HAND_BACK_DUE) {
+  handBackDue = true;
+  dueText = text;
+  notice("");
 }
 
 function overlay(text, resumable = false) {
@@ -106,7 +119,7 @@ function setMode(next) {
   mode = next;
   pedal = "release";
   toggling = false;
-  if (next === "auto") { handBackDue = false; notice(""); }   // the hand-back warning is answered
+  if (next === "auto") { handBackDue = false; dueText = HAND_BACK_DUE; notice(""); }   // answered
   const indicator = $("mode");
   indicator.textContent = next === "manual" ? "MANUAL" : "AUTOPILOT";
   indicator.className = next;
@@ -212,6 +225,7 @@ function onFrame(frame) {
   const first = !latest;
   latest = frame;
   if (first) updateControls();   // the vehicle is ready: it can be taken over
+  if (frame.held && frame.mode === "manual" && mode === "manual" && !handBackDue) handBackNow();
   if (state.phase !== "paused") overlay("");
   setText($("speed"), `${(frame.speed * 3.6).toFixed(0)} km/h`);
   const oncoming = onOncomingLane(frame);
@@ -255,7 +269,7 @@ function readInputs() {
   const ask = inputs.ask(devices);
   offerCalibration(ask);
   if (ask) {
-    setText($("incident"), [ask, handBackDue ? HAND_BACK_DUE : ""].join(" ").trim());
+    setText($("incident"), [ask, handBackDue ? dueText : ""].join(" ").trim());
     askedForInput = true;
   } else if (askedForInput) { askedForInput = false; notice(""); }   // connected, or calibrated, now
   if (!controls) {   // nothing the study allows can be read
@@ -486,7 +500,8 @@ function onMessage(message) {
     case "mode": setMode(message.mode); break;
     case "incident": notice(NOTICES[message.kind] || ""); break;
     case "warning":
-      if (message.kind === "hand_back") { handBackDue = true; notice(""); }
+      if (message.kind === "hand_back") handBackNow();
+      else if (HELD.has(message.kind)) handBackNow(WARNINGS[message.kind]);
       else if (message.kind in WARNINGS) notice(WARNINGS[message.kind], FIRST.has(message.kind));
       updateControls();
       break;

@@ -349,3 +349,45 @@ def test_a_calibrated_wheel_resting_off_centre_sends_no_steering(station):
         assert controls(sent_after(SET_DEVICES, [wheel(steer=off, throttle=off, brake=off)])) == [
             ("wheel", 0.0, 0.0, 0.0)]
         assert controls(sent_after(SET_DEVICES, [wheel(steer=-off, brake=off)])) == []
+
+
+def test_a_person_held_for_the_hand_back_is_told_to_hand_back_whatever_else_is_said(station, tmp_path):
+    """Held for the hand-back, the car waits for it: the station says so until it comes, over
+    whatever else comes meanwhile. A hold that begins while the wheel waits for its calibration is
+    said beside that ask, and stays once the wheel is calibrated; an incident ahead and the road's
+    end do not take it down; frames held with no warning at all (a takeover after the commit point
+    is held at the road's end with no warning to hand back; a page opened mid-hold saw none) say it
+    too; the hand-back ends it."""
+    incident = "document.getElementById('incident').textContent"
+    with devices_ready(station, ["wheel"]) as (page, socket, _, frame):
+        moving = {**frame, "speed": 5.0, "mode": "manual"}
+        page.evaluate(SET_DEVICES, [wheel()])
+        drive(page, socket, moving)
+        asked = "not calibrated"
+        page.locator("#incident").filter(has_text=asked).wait_for()
+        socket.send(json.dumps({"type": "warning", "kind": "hold", "t": 10.5}))
+        socket.send(json.dumps({**moving, "t": 10.5, "speed": 0.0, "held": True}))
+        # said beside the ask (which the page writes at every animation frame)
+        hold = "The junction is near: the car stops here. Hand back now."
+        wait_until(page, f"{incident}.includes({asked!r}) && {incident}.endsWith({hold!r})")
+        page.screenshot(path=str(tmp_path / "held-uncalibrated.png"))
+        calibrate_wheel(page)
+        wait_until(page, f"!{incident}.includes({asked!r})")
+        page.wait_for_timeout(300)   # animation frames read the calibrated wheel
+        assert page.evaluate(incident) == hold
+        socket.send(json.dumps({"type": "incident", "kind": "obstacle", "t": 11.0}))
+        socket.send(json.dumps({"type": "road", "index": 1, "incident": "none", "takeover": True,
+                                "performance": "succ", "t": 11.0, "prompt": None}))
+        page.wait_for_timeout(300)
+        assert page.evaluate(incident) == hold
+        page.screenshot(path=str(tmp_path / "held-calibrated.png"))
+        socket.send(json.dumps({"type": "mode", "mode": "auto", "t": 12.0}))
+        socket.send(json.dumps({**moving, "t": 12.0, "mode": "auto", "held": False}))
+        wait_until(page, f"{incident} === ''")
+        socket.send(json.dumps({"type": "mode", "mode": "manual", "t": 13.0}))   # after the commit point
+        socket.send(json.dumps({**moving, "t": 13.0, "held": False}))
+        page.wait_for_timeout(300)
+        assert page.evaluate(incident) == ""
+        socket.send(json.dumps({**moving, "t": 13.5, "held": True}))   # held, with no warning
+        page.locator("#incident").filter(has_text="Hand back before the junction (space)").wait_for()
+        page.screenshot(path=str(tmp_path / "held-unwarned.png"))
