@@ -287,7 +287,7 @@ COMPARED = {"synth": {"tau", "horizon", "time_limit", "work_limit", "node_budget
             "evaluate": {"fallback_after", "belief_rule", "max_nodes", "time_limit", "cache_dir"},
             "run": {"seed", "initial_trust", "cache_dir", "background_vehicles"},
             "study": {"out", "workers", "scheduler", "engine", "attempts"},
-            "analyze": {"belief_source"},
+            "analyze": {"belief_source", "out"},
             "plan": {"sizes", "simulations", "tests", "alpha", "target", "driver", "population", "pilot",
                      "pilot_bootstrap", "seed", "out"},
             "live": {"pace", "resume_within", "warm_up", "secure_cookies", "public_origins"},
@@ -314,15 +314,22 @@ def test_every_option_the_api_shares_has_the_same_default(command):
         assert options[name] == api[name], name
 
 
-def test_the_defaults_that_differ_by_design():
+def test_the_defaults_that_differ_by_design(tmp_path):
     options, api = _cli_defaults("evaluate"), _api_defaults(EvaluationSettings)
     # the CLI's --max-junctions says "the cap" (None), the API's max_junctions names it
     assert options["max_junctions"] is None and api["max_junctions"] == defaults.JUNCTION_CAP
-    # analyze: the command printing its tables rewrites the report; the API, like --json, hands the
-    # analysis over as data and writes no file unless asked
-    assert _cli_defaults("analyze")["report"] is None
-    assert _api_defaults(trustroute.analyze)["report"] is defaults.REPORT_WITH_DATA is False
-    assert defaults.REPORT_WITH_TABLES is True
+    # analyze: both doors leave `report` to one rule (app/analysis.py `report_wanted`): written when
+    # a folder is named (`out`), else by the door's default: the command printing its tables
+    # rewrites the report; the API, like --json, hands the analysis over as data and writes no file
+    from trustroute.app.analysis import report_wanted
+
+    assert _cli_defaults("analyze")["report"] is None and _api_defaults(trustroute.analyze)["report"] is None
+    assert defaults.REPORT_WITH_DATA is False and defaults.REPORT_WITH_TABLES is True
+    study = tmp_path / "study"
+    study.mkdir()
+    assert report_wanted(study, None, defaults.REPORT_WITH_DATA, None) is False
+    assert report_wanted(study, None, defaults.REPORT_WITH_TABLES, None) is True
+    assert report_wanted(study, None, defaults.REPORT_WITH_DATA, tmp_path / "out") is True
 
 
 def test_a_study_takes_the_cpu_count_at_both_doors(tmp_path):
