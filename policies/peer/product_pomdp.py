@@ -109,12 +109,18 @@ class ExplicitProduct:
     def n_states(self) -> int:
         return int(self.observation.size)
 
+    def rationals(self) -> tuple[Fraction, ...]:
+        """`exact_factors`; ValueError for a product built without them."""
+        if not self.exact_factors:
+            raise ValueError("the product was built without its rationals: explicit_product(..., exact=True)")
+        return self.exact_factors
+
     def to_drn(self, exact: bool = False) -> str:
         """The DRN text; `exact`: each probability as its rational (`exact_factors`)."""
         order = np.argsort(self.transition_choice, kind="stable")
         targets = self.transition_target[order]
         if exact:
-            texts = [str(f) for f in self.exact_factors]
+            texts = [str(f) for f in self.rationals()]
             probabilities = [texts[code] for code in self.transition_factor[order].tolist()]
         else:
             probabilities = [repr(p) for p in self.transition_probability[order].tolist()]
@@ -134,7 +140,10 @@ class ExplicitProduct:
         return "\n".join(lines) + "\n"
 
 
-def explicit_product(pomdp: TrustPOMDP, spec: Spec, horizon: int | None = None) -> ExplicitProduct:
+def explicit_product(pomdp: TrustPOMDP, spec: Spec, horizon: int | None = None,
+                     exact: bool = False) -> ExplicitProduct:
+    """The product; `exact`: with its probabilities as rationals too (`exact_factors`, for Storm's
+    exact engine; without it the tuple is empty, as the peers' double-precision runs need none)."""
     check_exportable(spec)
     if horizon is not None and horizon < 0:
         raise ValueError(f"horizon must be >= 0, got {horizon}")
@@ -243,7 +252,8 @@ def explicit_product(pomdp: TrustPOMDP, spec: Spec, horizon: int | None = None) 
         choice_state=new_id[c_state[keep_choice]], choice_label=tuple(c_label[keep_choice].tolist()),
         transition_choice=new_choice[t_choice[keep_tr]], transition_target=new_id[t_target[keep_tr]],
         transition_probability=t_prob[keep_tr], transition_factor=t_factor[keep_tr],
-        exact_factors=exact_factors(pomdp, outcomes), road=road[reached], step=step[reached])
+        exact_factors=exact_factors(pomdp, outcomes) if exact else (), road=road[reached],
+        step=step[reached])
 
 
 def _reached_from_begin(n_states: int, source: np.ndarray, target: np.ndarray) -> np.ndarray:

@@ -98,8 +98,9 @@ def storm_exact_value(chain: ExplicitProduct) -> Fraction:
     # Storm's exact DRN reader takes a row that is not a distribution as it is (a row summing to
     # 1 + 1e-12 moves the value without a word), so the rows are checked here, exactly.
     totals = [Fraction(0)] * chain.choice_state.size
+    factors = chain.rationals()
     for choice, code in zip(chain.transition_choice.tolist(), chain.transition_factor.tolist(), strict=True):
-        totals[choice] += chain.exact_factors[code]
+        totals[choice] += factors[code]
     if any(total != 1 for total in totals):
         raise ValueError("a choice's exact probabilities do not sum to 1")
     model, prop, _ = _storm_call(build_storm_model, chain, exact=True)

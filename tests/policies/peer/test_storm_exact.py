@@ -119,7 +119,7 @@ class RoutePolicy:
 
 
 def storm_route_value(pomdp, spec, route: list[str], horizon: int) -> Fraction:
-    product = explicit_product(pomdp, spec, horizon)
+    product = explicit_product(pomdp, spec, horizon, exact=True)
     return storm_exact_value(induced_chain(product, route_choices(product, pomdp, route)))
 
 
@@ -148,7 +148,7 @@ def test_storm_exact_sees_a_shift_of_1e_12_in_one_transition(decimal_pomdp):
     route = baseline_route(town, spec)
     horizon = len(route) - 1
     ours = exact_joint_value(decimal_pomdp, spec, horizon, policy=RoutePolicy(town, route))
-    product = explicit_product(decimal_pomdp, spec, horizon)
+    product = explicit_product(decimal_pomdp, spec, horizon, exact=True)
     chain = induced_chain(product, route_choices(product, decimal_pomdp, route))
     assert storm_exact_value(chain) == ours
     # a choice of the last junction into v3 with a goal outcome (trust 6 or 7) and another
