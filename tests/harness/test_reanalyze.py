@@ -28,18 +28,25 @@ def exported(capsys, study: Path, package: Path) -> Path:
     return package
 
 
+@pytest.fixture
+def study(model_study, tmp_path) -> Path:
+    """A copy of the shared model study: an export writes the study's key into it (export-key.json),
+    which the shared study must not carry into other tests."""
+    return Path(shutil.copytree(model_study, tmp_path / "study"))
+
+
 def files_of(folder: Path) -> dict[str, bytes]:
     return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
-def test_a_package_gives_the_study_s_figures_and_stays_as_published(model_study, tmp_path, capsys):
-    package = exported(capsys, model_study, tmp_path / "package")
+def test_a_package_gives_the_study_s_figures_and_stays_as_published(study, tmp_path, capsys):
+    package = exported(capsys, study, tmp_path / "package")
     published = files_of(package)
-    study, packaged = analysed(capsys, model_study), analysed(capsys, package)
+    own, packaged = analysed(capsys, study), analysed(capsys, package)
     assert packaged["study_dir"] == str(package)
     assert {k: v for k, v in packaged.items() if k not in PATHS} == {
-        k: v for k, v in study.items() if k not in PATHS}
-    assert study["cells"] and study["paired"] and study["sensitivity"]   # figures, not empty tables
+        k: v for k, v in own.items() if k not in PATHS}
+    assert own["cells"] and own["paired"] and own["sensitivity"]   # figures, not empty tables
     code, _, err = run_cli(capsys, "analyze", str(package))   # printing the tables writes nothing
     assert code == 0, err
     assert files_of(package) == published
@@ -47,8 +54,8 @@ def test_a_package_gives_the_study_s_figures_and_stays_as_published(model_study,
     assert check.returncode == 0, check.stdout
 
 
-def test_a_package_s_report_goes_only_where_the_user_names(model_study, tmp_path, capsys):
-    package = exported(capsys, model_study, tmp_path / "package")
+def test_a_package_s_report_goes_only_where_the_user_names(study, tmp_path, capsys):
+    package = exported(capsys, study, tmp_path / "package")
     published = files_of(package)
     code, out, err = run_cli(capsys, "analyze", str(package), "--report")
     assert_one_line_error(code, err, str(package), "--out", "read-only")
@@ -58,8 +65,8 @@ def test_a_package_s_report_goes_only_where_the_user_names(model_study, tmp_path
     assert files_of(package) == published
 
 
-def test_a_tampered_package_is_refused_naming_the_file(model_study, tmp_path, capsys):
-    package = exported(capsys, model_study, tmp_path / "package")
+def test_a_tampered_package_is_refused_naming_the_file(study, tmp_path, capsys):
+    package = exported(capsys, study, tmp_path / "package")
     roads = package / "tables" / "roads.parquet"
     roads.write_bytes(roads.read_bytes() + b"\0")
     code, out, err = run_cli(capsys, "analyze", str(package), "--json")
@@ -86,8 +93,8 @@ def test_true_source_of_drivers_by_number_is_said_not_available(pilot_study, tmp
     assert_one_line_error(code, err, "--belief-source", "pseudonymous codes hide")
 
 
-def test_a_package_without_a_manifest_is_refused(model_study, tmp_path, capsys):
-    package = exported(capsys, model_study, tmp_path / "package")
+def test_a_package_without_a_manifest_is_refused(study, tmp_path, capsys):
+    package = exported(capsys, study, tmp_path / "package")
     shutil.copytree(package, tmp_path / "old")
     sums = tmp_path / "old" / "SHA256SUMS"
     sums.write_text("".join(line + "\n" for line in sums.read_text().splitlines()
