@@ -15,7 +15,6 @@ withdrawal cannot reach a package already shared, so it says which ones to repla
 from __future__ import annotations
 
 import getpass
-import hashlib
 import json
 import re
 import time
@@ -25,6 +24,7 @@ from pathlib import Path
 from trustroute.core.dataset import ATTEMPTS_FILE, FAILURES_DIR, MANIFEST_FILE, PARTS_DIR, TABLES
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text
+from trustroute.core.package import sha256_of
 from trustroute.core.validation import read_json
 from trustroute.core.wording import counted
 from trustroute.harness.live.answers import answer_rows, write_answer_table
@@ -42,14 +42,6 @@ AUDIT = "withdrawals.jsonl"
 # Folders holding one file per episode id (the participant's start with p<5 digits>-).
 PARTICIPANT_FOLDERS: tuple[str, ...] = (PARTS_DIR, FAILURES_DIR, "recordings", "live/warmup/parts",
                                         "live/questionnaires")
-
-
-def sha256_of(path: Path) -> str:
-    digest = hashlib.sha256()
-    with Path(path).open("rb") as source:
-        for block in iter(lambda: source.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def participant_files(study_dir: Path, participant: int) -> list[Path]:

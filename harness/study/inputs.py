@@ -32,6 +32,7 @@ from pathlib import Path
 from trustroute.core.dataset import MANIFEST_FILE
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_bytes
+from trustroute.core.package import sha256_of
 from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.harness.study.config import NAMED_CONDITIONS
 from trustroute.harness.study.context import (
@@ -50,10 +51,6 @@ from trustroute.policies.resolve import aware_cache_path, population_cache_path
 INPUTS_DIR = "inputs"
 POLICIES_DIR = f"{INPUTS_DIR}/policies"
 MANIFEST_FIX = f"restore {MANIFEST_FILE} from the study directory's original copy"
-
-
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 # What a study directory holds of its inputs: relative path -> {"sha256": ..., "source": ...}.
@@ -236,7 +233,7 @@ def verify_inputs(manifest: dict, study_dir: Path) -> None:
         if not path.is_file():
             raise InputError(str(study_dir), relative, "a stored input of the study is missing",
                              "copy the whole study directory, inputs/ included")
-        if _sha256(path) != entry.get("sha256"):
+        if sha256_of(path) != entry.get("sha256"):
             raise InputError(str(study_dir), relative, "a stored input of the study changed since it was "
                              "run (its SHA-256 differs from the manifest's)",
                              "restore the study directory from its original copy")

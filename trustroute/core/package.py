@@ -16,13 +16,12 @@ import hashlib
 from pathlib import Path
 
 from trustroute.core.errors import InputError
-from trustroute.core.validation import read_input_bytes, read_input_text
+from trustroute.core.validation import read_input_text
 
 PACKAGE_TABLES_DIR = "tables"
 PACKAGE_CONFIG_FILE = "study_config.json"
 PACKAGE_MANIFEST_FILE = "study_manifest.json"   # the manifest, as far as a package holds it
 SUMS_FILE = "SHA256SUMS"                         # `sha256sum -c` format: "<hex>  <relative path>"
-MAX_PACKAGE_FILE_BYTES = 8 * 1024**3             # a package file is hashed whole (a table's limit)
 PACKAGE_FIX = ("this is a package `trustroute export` wrote, not a study directory: `trustroute "
                "analyze` reads it, but replay, fit or export the study directory it was exported from; "
                f"the package's tables are Parquet files under {PACKAGE_TABLES_DIR}/, their columns in "
@@ -46,8 +45,12 @@ def package_fix(folder: Path) -> str | None:
 
 
 def sha256_of(path: Path) -> str:
-    data = read_input_bytes(path, "package file", MAX_PACKAGE_FILE_BYTES, fix=TAMPERED_FIX)
-    return hashlib.sha256(data).hexdigest()
+    """The file's SHA-256 (hex), read in blocks: a table may be larger than memory holds at ease."""
+    digest = hashlib.sha256()
+    with Path(path).open("rb") as source:
+        for block in iter(lambda: source.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
 
 
 def verify_package(folder: Path) -> bool:
@@ -74,7 +77,11 @@ def verify_package(folder: Path) -> bool:
         path = folder / name
         if not path.is_file():
             raise InputError(str(path), "", f"a file {SUMS_FILE} lists is missing", TAMPERED_FIX)
-        if sha256_of(path) != digest:
+        try:
+            actual = sha256_of(path)
+        except OSError as error:
+            raise InputError(str(path), "", f"cannot be read ({error.strerror})", TAMPERED_FIX) from None
+        if actual != digest:
             raise InputError(str(path), "", f"its SHA-256 differs from the one in {SUMS_FILE}: the "
                              "package changed since it was exported", TAMPERED_FIX)
     return True
