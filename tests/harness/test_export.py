@@ -352,7 +352,8 @@ def test_a_task_file_the_package_does_not_ship_is_not_read(tmp_path, capsys):
 
 
 def test_a_package_passed_for_a_study_says_it_is_a_package(model_study, tmp_path, capsys):
-    code, _, err = run_cli(capsys, "export", str(model_study), "--out", str(tmp_path / "package"))
+    study = shutil.copytree(model_study, tmp_path / "study")   # an export writes its key into the study
+    code, _, err = run_cli(capsys, "export", str(study), "--out", str(tmp_path / "package"))
     assert code == 0, err
     package = str(tmp_path / "package")
     for command in (["fit", package, "--out", str(tmp_path / "driver.json")],
