@@ -49,12 +49,20 @@ def listen(page, socket):
     received: list[dict] = []
     socket.on_message(lambda text: received.append(json.loads(text)))
 
+    def sent(messages: list[dict]) -> list[dict]:
+        return [message for message in messages if message["type"] in ("control", "hand_back")]
+
     def sent_after(script: str, arg) -> list[dict]:
-        page.wait_for_timeout(300)
+        # what the page sends before `script` has settled first: 300 ms with nothing more sent (on a
+        # loaded machine the page's first control after a takeover can come later than 300 ms)
+        before = -1
+        while len(sent(received)) != before:
+            before = len(sent(received))
+            page.wait_for_timeout(300)
         count = len(received)
         page.evaluate(script, arg)
         page.wait_for_timeout(400)   # many animation frames have read the device by then
-        return [message for message in received[count:] if message["type"] in ("control", "hand_back")]
+        return sent(received[count:])
 
     return sent_after
 
