@@ -343,21 +343,28 @@ function offerCalibration(ask) {
   // in a drive below the view, so the view the person watches does not move
   const before = inDrive(state.phase) ? document.querySelector("#drive-step .trust-now") : $("trial-text");
   if (box.nextElementSibling !== before) before.before(box);
-  const text = $("calibration-text");
+  // out of a walk-through the box says the last calibration made and, on the ready step, what is
+  // still wanted (a pedal box calibrated alone: the steering), so neither hides the other
   const said = state.phase === "ready" && wanted ? ask : "";
-  if (!calibrating && (said || calibrationWanted(text.textContent))) setText(text, said);
+  if (!calibrating) setText($("calibration-text"), [calibratedText, said].filter(Boolean).join(" "));
 }
 // the ready step runs no animation loop to read the device: it is looked at twice a second
 setInterval(() => { if (inputs && state.phase === "ready") offerCalibration(inputs.ask()); }, 500);
 
 let calibration = null;
+let calibratedText = "";   // what the last calibration made said it calibrated
 $("calibrate").addEventListener("click", () => {
+  calibratedText = "";
   calibration = new Calibration((text) => { $("calibration-text").textContent = text; });
   $("calibrate-next").classList.remove("hidden");
 });
 $("calibrate-next").addEventListener("click", () => {
   const done = calibration && calibration.next();
-  if (done) { inputs.calibrated(done); $("calibrate-next").classList.add("hidden"); }
+  if (done) {
+    calibratedText = $("calibration-text").textContent;
+    inputs.calibrated(done);
+    $("calibrate-next").classList.add("hidden");
+  }
 });
 
 function setView(kind) {
@@ -419,6 +426,7 @@ const inDrive = (phase) => phase === "driving" || phase === "paused";
 
 function onState(message) {
   const resumed = state.phase === "paused" && message.phase === "driving";
+  if (message.phase !== state.phase) calibratedText = "";   // said on the step it was made on
   state = message;
   if (inputs) offerCalibration(inputs.ask());
   if (resumed && mode === "manual" && !continuous) send({ type: "drive", pedal });

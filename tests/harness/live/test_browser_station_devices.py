@@ -108,7 +108,7 @@ def test_the_pedal_box_unplugged_mid_drive_lets_go_of_the_accelerator(station, t
         wait_until(page, "!document.getElementById('incident').textContent.includes('No device')")
 
 
-def test_a_pedal_box_alone_is_calibrated_without_a_steering_step(station):
+def test_a_pedal_box_alone_is_calibrated_without_a_steering_step(station, tmp_path):
     """A pedal box has no steering axis: the steps it does not move (the wheel's, the button's) are
     not on it, and the walk-through goes on to the pedals without asking for the right turn; its
     calibration gives the accelerator and the brake only. Driving with it, the steering is asked
@@ -117,7 +117,11 @@ def test_a_pedal_box_alone_is_calibrated_without_a_steering_step(station):
         page.evaluate(SET_DEVICES, [pedal_box()])
         shown = calibrate(page, lambda steer=0, button=False, **pedals: [pedal_box(**pedals)])
         assert not [text for text in shown if "fully to the right" in text]
-        assert shown[-1].endswith(f'"{PEDALS}": the accelerator, the brake).')
+        assert shown[-1].startswith("Calibrated") and f'"{PEDALS}": the accelerator, the brake).' in shown[-1]
+        # the ready step goes on saying both what was calibrated and what is still wanted
+        wait_until(page, "(t => t.startsWith('Calibrated') && t.includes('No device connected gives "
+                   "the steering'))(document.getElementById('calibration-text').textContent)")
+        page.screenshot(path=str(tmp_path / "pedal-box-calibrated.png"))
         kept = page.evaluate(CALIBRATIONS)[PEDALS]
         assert kept["steer"] is None and kept["button"] is None
         assert (kept["throttle"]["rest"], kept["throttle"]["full"]) == (1, -1)
