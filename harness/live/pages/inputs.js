@@ -92,6 +92,9 @@ const NOT_GIVEN = "No device connected gives ";
 // The asks a calibration may answer: a device not read, a control no device gives.
 export const calibrationWanted = (ask) => ask === UNCALIBRATED || ask.startsWith(NOT_GIVEN);
 
+// The axes a calibration found on its device.
+const calibrationGives = (calibration) => CONTROLS.filter((name) => calibration[name]);
+
 // A device is read by its calibration, or in the standard mapping; else not at all.
 const readable = ({ pad, calibration }) => calibration !== null || pad.mapping === "standard";
 
@@ -165,9 +168,9 @@ export class Inputs {
     return `Connect ${names.join(" or ")} to drive: this study does not use the keyboard.`;
   }
 
-  // The controls a readable device gives.
+  // The controls a readable device gives: its calibration's, or all in the standard mapping.
   gives({ calibration }) {
-    return calibration ? CONTROLS.filter((name) => calibration[name]) : CONTROLS;
+    return calibration ? calibrationGives(calibration) : CONTROLS;
   }
 
   // One device now, the dead zone taken out: {steer, throttle, brake (null: not on this device),
@@ -287,7 +290,7 @@ export class Calibration {
       return false;
     }
     saveCalibrations(calibrations);
-    const said = calibrations.map((c) => `"${c.id}": ${[...CONTROLS.filter((n) => c[n]).map((n) => NAMES[n]),
+    const said = calibrations.map((c) => `"${c.id}": ${[...calibrationGives(c).map((n) => NAMES[n]),
       ...(c.button === null ? [] : ["the button"])].join(", ")}`);
     this.onText(`Calibrated: this browser remembers it for each device (${said.join("; ")}).`);
     return calibrations;
