@@ -10,9 +10,9 @@ participants' variance to the residual variance, maximised over [0, inf) with th
 included: the fixed effects are then the GLS estimate and their covariance the residual variance
 times (X' V^-1 X)^-1. A study whose participants differ little has its REML optimum at that
 boundary (a variance of 0, the fit being ordinary least squares: the demo study's trust model
-is one); statsmodels' MixedLM does not converge there (its optimisers stop short of the boundary
-or fail on a singular matrix), so the fit is computed here and statsmodels checks it in the tests
-where its fit converges.
+is one); statsmodels' MixedLM does not reach it (its optimisers stop short of the boundary, saying
+they converged or not depending on the processor, or fail on a singular matrix), so the fit is
+computed here and statsmodels checks it in the tests where its fit converges.
 
 Separation is detected from the data before the conditional logit is fitted (`separation`): the
 conditional likelihood grows without bound along a coefficient direction d exactly when, within every

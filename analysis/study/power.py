@@ -138,12 +138,16 @@ def _mixed(value, treated, participant, strata, pair: tuple[str, str], alpha: fl
     return TestResult("mixed_model", pair, ALL_SPECS, bool(p < alpha), p, effect.estimate)
 
 
-def episodes_tests(episodes: pd.DataFrame, tests: Sequence[str], alpha: float) -> list[TestResult]:
+def episodes_tests(episodes: pd.DataFrame, tests: Sequence[str], alpha: float,
+                   conditions: Sequence[str] | None = None) -> list[TestResult]:
     """`study_tests` on a study's episodes table (episodes.parquet: participant, spec, condition,
     satisfied, mean_reported_trust), so a simulated study and a run one are analysed alike; the
-    mixed model reads the rows in the table's order, as the report does."""
+    pairs of `conditions` (default: in the order the table names them; the report's: the config's).
+    The mixed model reads the rows in the table's order (the report's are in the analysis' order of
+    the participants, canonical.py): its optimiser's sums follow the rows and the coding of the
+    pair, so another order or pair moves its p-value in about the ninth digit."""
     specs = list(dict.fromkeys(episodes["spec"]))
-    conditions = list(dict.fromkeys(episodes["condition"]))
+    conditions = list(dict.fromkeys(episodes["condition"]) if conditions is None else conditions)
     people = sorted(episodes["participant"].unique())
     shape = (len(people), len(specs), len(conditions))
     satisfied, reported = np.zeros(shape, dtype=bool), np.full(shape, np.nan)
