@@ -106,6 +106,14 @@ def test_api_settings_follow_the_cli_rules(call, named):
     assert "--" not in str(caught.value)
 
 
+def test_a_limit_evaluate_refuses_is_refused_before_a_policy_is_synthesized(tmp_path):
+    # trustroute/app/synthesis.py, `evaluate_problem`: the limits first, then the policy ("aware"
+    # would be synthesized and cached in `cache_dir`)
+    with pytest.raises(InputError, match="^time_limit: applies to specs with trust-state atoms only"):
+        trustroute.evaluate("phi1", "aware", cache_dir=tmp_path / "cache", time_limit=1.0)
+    assert not (tmp_path / "cache").exists()
+
+
 def test_a_command_quoted_in_an_api_error_keeps_its_flags(tmp_path):
     # "run `trustroute study CONFIG --out DIR` first" is a command to type: its --out stays
     with pytest.raises(InputError, match="`trustroute study CONFIG --out DIR`"):

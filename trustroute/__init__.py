@@ -198,21 +198,12 @@ def evaluate(spec: Spec | PathLike, policy: PolicyLike = defaults.POLICY,
     the AV filtering with its type-aware model; policy "free", "robust", "bayes" or a population
     policy file (docs/driver_types.md), as `trustroute evaluate --population`.
     """
-    from trustroute.app.synthesis import (
-        EvaluationSettings,
-        check_evaluation,
-        evaluate_population,
-        evaluate_single,
-    )
+    from trustroute.app.synthesis import EvaluationSettings, evaluate_problem
     from trustroute.core.settings import with_options
 
     chosen = with_options(settings, EvaluationSettings(), options, "evaluate")
     problem = _compiled(spec, town, driver, population)
-    check_evaluation(problem, chosen)
-    routing = _policy(policy, problem, cache_dir)
-    if problem.population is not None:
-        return evaluate_population(problem, routing, chosen)[0]
-    return evaluate_single(problem, routing, chosen)
+    return evaluate_problem(problem, lambda: _policy(policy, problem, cache_dir), chosen)
 
 
 @_door

@@ -29,12 +29,7 @@ from gymnasium import spaces
 from trustroute.app.drivers import draw_type, gym_episode_id, synthetic_driver
 from trustroute.app.engines import SIMULATED, engine_named
 from trustroute.app.problem import load_problem
-from trustroute.app.synthesis import (
-    EvaluationSettings,
-    check_evaluation,
-    evaluate_population,
-    evaluate_single,
-)
+from trustroute.app.synthesis import EvaluationSettings, evaluate_problem
 from trustroute.core import defaults
 from trustroute.core.errors import InputError, keyword_names
 from trustroute.core.fields import PROBABILITY, check_value
@@ -383,13 +378,9 @@ class TrustRoutingEnv(gymnasium.Env):
             settings = EvaluationSettings(fallback_after=None, max_junctions=self.setup.junction_cap,
                                           belief_rule=self._belief_rule, max_nodes=max_nodes,
                                           time_limit=time_limit)
-            check_evaluation(self.problem, settings)
+            return evaluate_problem(self.problem, lambda: self.agent_policy(act), settings)
         except InputError as error:   # said as the API says it: `max_nodes`, not --max-nodes
             raise keyword_names(error) from None
-        policy = self.agent_policy(act)
-        if self.population is not None:
-            return evaluate_population(self.problem, policy, settings)[0]
-        return evaluate_single(self.problem, policy, settings)
 
     def render(self) -> None:
         """Nothing: there are no render modes, and gymnasium's rule for `render_mode=None` is that no

@@ -4,6 +4,7 @@ policy file written where asked."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -203,6 +204,18 @@ def evaluate_population(problem: Problem, policy: RoutingPolicy,
     value = evaluate_plain(problem.pomdp, problem.spec, policy, settings)
     return (certified(problem, value),
             tuple(per_type_values(problem.pomdp, problem.spec, policy, population, cap, rule, after)))
+
+
+def evaluate_problem(problem: Problem, make_policy: Callable[[], RoutingPolicy],
+                     settings: EvaluationSettings) -> Evaluation:
+    """The certified value of the policy `make_policy` gives, on `problem` (over the population's
+    mixture of types when it has one): the limits checked first (`check_evaluation`), so that a
+    bad one is refused before a policy is synthesized or read."""
+    check_evaluation(problem, settings)
+    policy = make_policy()
+    if problem.population is not None:
+        return evaluate_population(problem, policy, settings)[0]
+    return evaluate_single(problem, policy, settings)
 
 
 @dataclass(frozen=True)

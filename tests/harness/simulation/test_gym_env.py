@@ -268,6 +268,31 @@ def test_an_agents_value_under_a_node_budget_brackets_its_exact_value():
         env.evaluate_agent(belief_agent, time_limit=5)
 
 
+@pytest.mark.parametrize("population", [None, "driver_population_three_types"])
+def test_an_agents_value_is_trustroute_evaluates_of_its_policy(population):
+    """evaluate_agent is trustroute.evaluate's one door (trustroute/app/synthesis.py,
+    `evaluate_problem`) with the environment's cap, belief rule and no fallback: equal values, for
+    one driver model and over a population's mixture, and the population's refusal of a node
+    budget in the environment's keywords."""
+    import trustroute
+    from trustroute.core.errors import InputError
+
+    def agent(observation) -> int:
+        return (observation["road"] + observation["junctions"]) % 2
+
+    env = TrustRoutingEnv("phi1_strict", engine="model", junction_cap=10, belief_rule="paper",
+                          population=population)
+    value = env.evaluate_agent(agent)
+    assert 0.05 < value.lower < 0.95   # the test has teeth
+    api = trustroute.evaluate("phi1_strict", env.agent_policy(agent), population=population,
+                              fallback_after=None, max_junctions=10, belief_rule="paper")
+    untimed = [{k: v for k, v in found.to_dict().items() if k != "seconds"} for found in (value, api)]
+    assert untimed[0] == untimed[1]
+    if population is not None:
+        with pytest.raises(InputError, match="^max_nodes: the pruning limits are not used"):
+            env.evaluate_agent(agent, max_nodes=5)
+
+
 def test_an_agent_as_a_routing_policy_drives_an_episode_as_step_does():
     """agent_policy: each junction run_episode drives is the agent's action on the observation the
     environment gives there (read off the episode's roads table), mapped as `step` maps it."""
