@@ -36,6 +36,7 @@ import numpy as np
 import pandas as pd
 
 from trustroute.core.errors import InputError
+from trustroute.core.validation import read_json
 
 REPO = Path(__file__).resolve().parents[1]
 CLI = [sys.executable, "-m", "trustroute"]
@@ -160,18 +161,16 @@ def digest(work: Path, only: list[str]) -> dict:
 
 
 def read_digest(path: Path) -> dict:
-    """A digest this module wrote; a file that is not one ends the command with one line (exit 2)."""
+    """A digest this module wrote, read as every JSON input is (trustroute/core/validation.py); a
+    file that is not one ends the command with one line (exit 2)."""
+    fix = "give a file `python -m benchmarks.result_digest OUT.json` wrote"
     try:
-        results = json.loads(path.read_text())
-        problem = "" if isinstance(results, dict) else "not a digest (an object of entries)"
-    except OSError as error:
-        problem = str(error.strerror)
-    except (UnicodeDecodeError, json.JSONDecodeError):
-        problem = "not JSON"
-    if problem:
-        fix = "give a file `python -m benchmarks.result_digest OUT.json` wrote"
-        print(InputError(str(path), "", problem, fix).one_line(), file=sys.stderr)
-        raise SystemExit(2)
+        results = read_json(path, "digest", fix=fix)
+        if not isinstance(results, dict):
+            raise InputError(str(path), "", "not a digest (an object of entries)", fix)
+    except InputError as error:
+        print(error.one_line(), file=sys.stderr)
+        raise SystemExit(2) from None
     return results
 
 

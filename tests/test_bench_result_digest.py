@@ -46,7 +46,9 @@ def test_a_digest_run_leaves_the_callers_cache_root_as_it_was(monkeypatch, capsy
     assert os.environ.get("XDG_CACHE_HOME") == before
 
 
-@pytest.mark.parametrize("text", [None, "{not json", "[1]"])
+# read as every JSON input is (trustroute/core/validation.py, read_json): nesting too deep for
+# json.loads to parse without a RecursionError is one line too
+@pytest.mark.parametrize("text", [None, "{not json", "[1]", "[" * 100_000, '{"a": 1, "a": 2}'])
 def test_comparing_a_file_that_is_no_digest_is_one_line_and_exit_2(tmp_path, capsys, text):
     good, bad = tmp_path / "good.json", tmp_path / "bad.json"
     good.write_text("{}\n")
