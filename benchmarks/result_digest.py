@@ -30,7 +30,6 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
-from unittest import mock
 
 import numpy as np
 import pandas as pd
@@ -67,9 +66,11 @@ SYNTHESES = [
 ]
 
 
-def _run(args: list[str], cwd: Path) -> dict:
-    done = subprocess.run([*CLI, *args, "--json"], cwd=cwd, capture_output=True, text=True,
-                          env={**os.environ, "PYTHONHASHSEED": "0"})
+def _run(args: list[str], cache: Path) -> dict:
+    """The JSON answer of `trustroute ARGS --json`, run in the repository with `cache` as its cache
+    root (XDG_CACHE_HOME), so that no policy or net of another tree's cache is read."""
+    done = subprocess.run([*CLI, *args, "--json"], cwd=REPO, capture_output=True, text=True,
+                          env={**os.environ, "PYTHONHASHSEED": "0", "XDG_CACHE_HOME": str(cache)})
     if done.returncode not in (0, 1):
         raise SystemExit(f"{' '.join(args)}: exit {done.returncode}: {done.stderr.strip()[-2000:]}")
     return json.loads(done.stdout)
@@ -123,7 +124,9 @@ def refuse_clock_cut(name: str, args: list[str], answer: dict) -> None:
 
 
 def digest(work: Path, only: list[str]) -> dict:
+    """The digest of the entries `only` names (all when empty), its files and caches in `work`."""
     results: dict = {}
+    cache = work / "cache"
 
     def wanted(name: str) -> bool:
         return not only or any(name.startswith(prefix) for prefix in only)
@@ -132,10 +135,10 @@ def digest(work: Path, only: list[str]) -> dict:
         if not wanted(name):
             continue
         out = work / f"{name}.json"
-        answer = _run(["synth", *args, "--out", str(out)], REPO)
+        answer = _run(["synth", *args, "--out", str(out)], cache)
         refuse_clock_cut(name, args, answer)
         population = ["--population", str(POPULATION)] if "--population" in args else []
-        evaluation = _run(["evaluate", args[0], str(out), *population], REPO)
+        evaluation = _run(["evaluate", args[0], str(out), *population], cache)
         results[name] = {
             "lower": answer["lower"], "upper": answer["upper"], "policy": _policy_digest(out),
             "evaluate": _untimed({k: v for k, v in evaluation.items() if k != "paths"}),
@@ -151,7 +154,7 @@ def digest(work: Path, only: list[str]) -> dict:
             f'engine = "{engine}"\nspecs = ["phi1", "phi2"]\nconditions = ["aware", "free"]\n'
         )
         study_dir = work / f"study_{engine}"
-        _run(["study", str(config), "--out", str(study_dir), "--workers", "2", "--quiet"], REPO)
+        _run(["study", str(config), "--out", str(study_dir), "--workers", "2", "--quiet"], cache)
         results[f"study_{engine}"] = {
             str(p.relative_to(study_dir)): _table_digest(p) for p in sorted(study_dir.rglob("*.parquet"))
             if not p.parent.name.startswith("part")
@@ -192,9 +195,7 @@ def main(argv: list[str]) -> None:
         differing = [k for k in keys if a.get(k) != b.get(k)]
         print("identical" if not differing else f"differ: {differing}")
         raise SystemExit(1 if differing else 0)
-    # the commands it runs cache in a fresh root; the caller's environment is left as it was
-    with tempfile.TemporaryDirectory() as tmp, \
-            mock.patch.dict(os.environ, {"XDG_CACHE_HOME": str(Path(tmp) / "cache")}):
+    with tempfile.TemporaryDirectory() as tmp:
         results = digest(Path(tmp), args.only)
     Path(args.paths[0]).write_text(json.dumps(results, indent=1, sort_keys=True) + "\n")
 

@@ -15,7 +15,7 @@ ENTRY = "phi1_strict_robust_H10"
 def test_an_entry_the_wall_clock_cut_gets_no_digest_but_one_line_and_exit_2(monkeypatch, capsys, tmp_path):
     calls = []
 
-    def run(args: list[str], cwd) -> dict:
+    def run(args: list[str], cache) -> dict:
         calls.append(args[0])
         return {"lower": 0.78, "upper": 0.83, "stopped_by": "time limit"}
 
@@ -29,6 +29,25 @@ def test_an_entry_the_wall_clock_cut_gets_no_digest_but_one_line_and_exit_2(monk
     assert err.startswith(f"{ENTRY}: ") and "rerun on a quieter machine or raise its time limit" in err
     assert "600 s time limit" in err
     assert calls == ["synth"] and not out.exists()     # not evaluated, no digest written
+
+
+def test_the_digests_commands_cache_in_a_root_of_their_own(monkeypatch, tmp_path):
+    """Each command the digest runs is given a cache root in the digest's work folder (a policy
+    cached by another tree would otherwise be read), and the caller's own root is left as it was."""
+    import subprocess
+
+    environments = []
+
+    def run(command, **options):
+        environments.append(options["env"])
+        return subprocess.CompletedProcess(command, 0, stdout="{}", stderr="")
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "callers"))
+    monkeypatch.setattr(result_digest.subprocess, "run", run)
+    result_digest.digest(tmp_path, ["study_model"])
+    assert [env["XDG_CACHE_HOME"] for env in environments] == [str(tmp_path / "cache")]
+    assert environments[0]["PYTHONHASHSEED"] == "0"
+    assert os.environ["XDG_CACHE_HOME"] == str(tmp_path / "callers")
 
 
 @pytest.mark.parametrize("stopped_by", ["work limit", "convergence"])
