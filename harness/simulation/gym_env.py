@@ -215,15 +215,12 @@ class TrustRoutingEnv(gymnasium.Env):
         point = probe.advance()
         self.driver_type = None
         if not isinstance(point, DecisionPoint):
-            raise self._decided_at_start(point.record)
+            spec = self.scldtl_spec
+            raise InputError(spec.source_path or spec.name, "start",
+                             f"the spec is decided on its start road {spec.start} "
+                             f"({point.record.summary['end_reason']}): an episode has no junction to "
+                             "choose", "start the spec on a road where its formula is not yet decided")
         probe.close()
-
-    def _decided_at_start(self, record: EpisodeRecord) -> InputError:
-        spec = self.scldtl_spec
-        return InputError(spec.source_path or spec.name, "start",
-                          f"the spec is decided on its start road {spec.start} "
-                          f"({record.summary['end_reason']}): an episode has no junction to choose",
-                          "start the spec on a road where its formula is not yet decided")
 
     def _new_episode(self, driver: SyntheticDriver, episode_id: str, sumo_seed: int) -> SteppableEpisode:
         if not engine_named(self.engine).drives_sumo:
@@ -250,10 +247,6 @@ class TrustRoutingEnv(gymnasium.Env):
             raise
 
     # -- observations ---------------------------------------------------------------------------
-    def _observation(self, road: str, dfa_state: int, belief: np.ndarray, junctions: int) -> dict:
-        self._road = road
-        return self._observed(road, dfa_state, belief, junctions)
-
     def _observed(self, road: str, dfa_state: int, belief: np.ndarray, junctions: int) -> dict:
         return {
             "road": int(self.town.state_index(road)),
@@ -269,8 +262,10 @@ class TrustRoutingEnv(gymnasium.Env):
         return {"action_mask": mask, "road_name": self._road, "legal_junctions": tuple(legal)}
 
     def _decision(self, context: DecisionContext) -> dict:
-        self._belief = np.asarray(context.belief, dtype=np.float64)
-        return self._observation(context.road, context.dfa_state, context.belief, context.junctions_driven)
+        """The observation at the decision point `context`, whose road and belief `step` and the
+        final observation then read."""
+        self._road, self._belief = context.road, np.asarray(context.belief, dtype=np.float64)
+        return self.observation_at(context)
 
     def observation_at(self, context: DecisionContext) -> dict:
         """The observation the environment gives at the decision point `context`."""
@@ -306,8 +301,9 @@ class TrustRoutingEnv(gymnasium.Env):
             summary.pop("sim_seconds", None)
         self.last_run = {"episode": self.episodes,
                          **{k: record.summary[k] for k in RUN_FACTS if k in record.summary}}
-        observation = self._observation(str(last["directed_road"]), int(last["dfa_state"]),
-                                        self._final_belief(last), int(summary["junctions"]))
+        self._road = str(last["directed_road"])
+        observation = self._observed(self._road, int(last["dfa_state"]), self._final_belief(last),
+                                     int(summary["junctions"]))
         reason = summary["end_reason"]
         info = {**self._info(), "end_reason": reason, "summary": summary}
         # The episode's own reading of the spec: the DFA's acceptance, and for a spec that tests
@@ -330,9 +326,9 @@ class TrustRoutingEnv(gymnasium.Env):
         episode_id = gym_episode_id(self.scldtl_spec.name, self.episodes)
         self._episode = self._new_episode(driver, episode_id, sumo_seed)
         point = self._advance()
-        if not isinstance(point, DecisionPoint):   # refused when made (_check_start): not reached
-            self._episode = None
-            raise self._decided_at_start(point.record)
+        # every episode reaches a decision point: a spec decided on its start road is refused when
+        # the environment is made (_check_start), and no junction cap is below 1
+        assert isinstance(point, DecisionPoint)
         return self._decision(point.context), self._info()
 
     def step(self, action: int) -> tuple[dict, float, bool, bool, dict]:
