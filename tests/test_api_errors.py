@@ -98,6 +98,8 @@ def test_an_empty_name_is_said_to_be_empty(call, what):
     (lambda: trustroute.run_episode("phi1", engine="bogus"), "engine: unknown engine 'bogus'"),
     (lambda: trustroute.run_episode("phi1", engine="model", rrd="x.rrd"),
      "rrd: a Rerun recording needs the SUMO engine"),
+    (lambda: trustroute.run_episode("phi1", engine="model", net="town.net.xml"),
+     "net: a SUMO net needs the SUMO engine, not 'model'"),
     (lambda: trustroute.run_study(STUDY, out="unused", workers=0), "workers: expected an integer from 1"),
 ])
 def test_api_settings_follow_the_cli_rules(call, named):

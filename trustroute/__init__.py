@@ -218,11 +218,11 @@ def run_episode(spec: Spec | PathLike, policy: PolicyLike = defaults.POLICY,
     and performance measured in the simulation, or "model": the trust POMDP alone, no SUMO), seed
     (SUMO's seed and the driver's Generator seed), initial_trust (the driver's initial trust;
     default: drawn from the model), rrd (also write a Rerun recording there; SUMO engine only),
-    net, sumo, ... policy: as for `evaluate` ("robust"/"bayes" with a population). population: a
-    driver population (instead of `driver`): the driver's type is drawn from it (seeded) and the
-    AV filters with its type-aware model. Returns the logs: `record.summary` (dict),
-    `record.roads`, `record.kinematics`, `record.incidents` (DataFrames, docs/dataset.md); the
-    episode follows the study's rules (20-junction fallback, 60-junction cap).
+    net (the SUMO net; SUMO engine only), sumo, ... policy: as for `evaluate` ("robust"/"bayes"
+    with a population). population: a driver population (instead of `driver`): the driver's type
+    is drawn from it (seeded) and the AV filters with its type-aware model. Returns the logs:
+    `record.summary` (dict), `record.roads`, `record.kinematics`, `record.incidents` (DataFrames,
+    docs/dataset.md); the episode follows the study's rules (20-junction fallback, 60-junction cap).
     """
     from trustroute.app.runs import EpisodeSettings, run_one_episode
     from trustroute.core.settings import with_options

@@ -27,7 +27,7 @@ import numpy as np
 from gymnasium import spaces
 
 from trustroute.app.drivers import draw_type, gym_episode_id, synthetic_driver
-from trustroute.app.engines import SIMULATED, engine_named
+from trustroute.app.engines import SIMULATED, check_sumo_only, engine_named
 from trustroute.app.problem import load_problem
 from trustroute.app.synthesis import EvaluationSettings, evaluate_problem
 from trustroute.core import defaults
@@ -67,9 +67,10 @@ RUN_FACTS = ("episode_id", "wall_seconds")
 class EnvSettings:
     """How the environment's episodes run. engine: "model" (fast, no SUMO) or "sumo" (libsumo).
     junction_cap: the episode ends after this many junctions (the task's horizon). belief_rule: the
-    AV's filter ("bayes" or "paper"). report_accuracy: the synthetic driver's trust-report accuracy (reports
-    are logged only). net_path: the SUMO net (None: the town's). Every field is checked here, by
-    the rules a study config's keys of the same names follow; a bad one is an InputError naming it."""
+    AV's filter ("bayes" or "paper"). report_accuracy: the synthetic driver's trust-report accuracy
+    (reports are logged only). net_path: the SUMO net (None: the town's; the SUMO engine's only).
+    Every field is checked here, by the rules a study config's keys of the same names follow; a bad
+    one is an InputError naming it."""
 
     engine: str = defaults.GYM_ENGINE
     junction_cap: int = DEFAULT_JUNCTION_CAP
@@ -78,7 +79,7 @@ class EnvSettings:
     net_path: str | Path | None = None
 
     def __post_init__(self) -> None:
-        engine_named(self.engine, "EnvSettings", "engine", simulated=True)
+        engine = engine_named(self.engine, "EnvSettings", "engine", simulated=True)
         check_value(self.junction_cap, JUNCTION_CAPS, "EnvSettings", "junction_cap",
                     lambda seen: f"expected an integer from {JUNCTION_CAPS.minimum} to "
                                  f"{JUNCTION_CAPS.maximum}, got {shown_value(seen.value)}",
@@ -91,6 +92,7 @@ class EnvSettings:
             raise InputError("EnvSettings", "net_path",
                              f"expected a file path, got {shown_value(self.net_path)}",
                              "pass the path of a SUMO .net.xml, or None for the town's net")
+        check_sumo_only(engine, self.net_path, "a SUMO net", "EnvSettings", "net_path")
 
 
 class AgentPolicy(RoutingPolicy):

@@ -51,3 +51,13 @@ def engine_named(name: str, where: str = "engine", place: str = "", simulated: b
         raise InputError(where, place, f"unknown engine {shown_value(name)}",
                          f"use one of {', '.join(names)}")
     return ENGINES[name]
+
+
+def check_sumo_only(engine: Engine, given: object, what: str, where: str, place: str = "") -> None:
+    """A setting only SUMO reads (`given`, not None; `what` names it: "a SUMO net") refused on an
+    engine that does not drive SUMO, an InputError at `where` and `place`, rather than dropped
+    unread."""
+    if given is None or engine.drives_sumo:
+        return
+    raise InputError(where, place, f"{what} needs the SUMO engine, not {engine.name!r}",
+                     f"run on the SUMO engine (engine 'sumo') or drop {place or where}")

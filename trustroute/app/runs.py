@@ -14,13 +14,12 @@ import pandas as pd
 
 from trustroute.analysis.fitting.posterior_check import add_model, check_of, real_arrays
 from trustroute.app.drivers import draw_type, episode_id, simulate, synthetic_driver
-from trustroute.app.engines import engine_named
+from trustroute.app.engines import check_sumo_only, engine_named
 from trustroute.app.inputs import load_inputs
 from trustroute.app.nets import net_for
 from trustroute.app.policy import PolicySettings, policy_for
 from trustroute.app.problem import check_initial_trust, compile_problem
 from trustroute.core import defaults
-from trustroute.core.errors import InputError
 from trustroute.core.ranges import SEED, keep_checked
 from trustroute.harness.simulation.episode import EpisodeOptions, EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
@@ -49,9 +48,8 @@ class EpisodeSettings:
     def __post_init__(self) -> None:
         keep_checked(self, {"seed": SEED})
         engine = engine_named(self.engine, "--engine", simulated=True)
-        if self.rrd is not None and not engine.records:
-            raise InputError("--rrd", "", f"a Rerun recording needs the SUMO engine, not {self.engine!r}",
-                             "run on the SUMO engine (engine 'sumo') or drop --rrd")
+        check_sumo_only(engine, self.rrd, "a Rerun recording", "--rrd")
+        check_sumo_only(engine, self.net, "a SUMO net", "--net")
 
 
 @dataclass(frozen=True)

@@ -436,6 +436,24 @@ def test_every_env_setting_is_checked_when_made(field, value, problem):
         assert str(error).startswith(f"EnvSettings: {field}: "), error
 
 
+def test_a_net_on_the_model_engine_is_refused_not_ignored(tmp_path):
+    """net_path is the SUMO engine's net (docs/gym_env.md): the model engine would drive without
+    reading it, so it is one InputError naming the field, as an unknown engine is."""
+    from trustroute.core.errors import InputError
+    from trustroute.harness.simulation.gym_env import EnvSettings
+
+    net = tmp_path / "town.net.xml"
+    said = ("EnvSettings: net_path: a SUMO net needs the SUMO engine, not 'model' (fix: run on the SUMO "
+            "engine (engine 'sumo') or drop net_path)")
+    for make in (lambda: EnvSettings(net_path=net), lambda: gymnasium.make(ENV_ID, spec="phi1", net_path=net),
+                 lambda: TrustRoutingEnv("phi1", settings=EnvSettings(engine="sumo", net_path=net),
+                                         engine="model")):
+        with pytest.raises(InputError) as error:
+            make()
+        assert error.value.one_line() == said
+    assert EnvSettings(engine="sumo", net_path=net).net_path == net   # the SUMO engine reads it
+
+
 @pytest.mark.parametrize(("argument", "value", "said"), [
     ("town", "city5", "pass an existing town file as town or a packaged town name"),
     ("driver", "no_such_driver.json", "pass an existing driver model file as driver or a packaged"),
