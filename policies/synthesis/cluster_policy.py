@@ -51,7 +51,7 @@ from trustroute.policies.synthesis.completion_value import (
     ordered_fill,
     outcome_table,
 )
-from trustroute.policies.synthesis.result import ClusterAttempt, ClusterRun, SynthesisStats
+from trustroute.policies.synthesis.result import ClusterAttempt, ClusterRun, SynthesisResult, SynthesisStats
 from trustroute.policies.synthesis.upper_bound import acceptance_distance
 from trustroute.policies.work_clock import CAPS, spend
 from trustroute.policies.work_clock import now as clock_now
@@ -367,12 +367,11 @@ def reached_cluster_cap(stats: object, lower: float, upper: float) -> bool:
             and (last.lower, last.upper) == (lower, upper))
 
 
-def belief_cap(stats: object, lower: float, upper: float) -> str | None:
-    """The cap of a belief-MDP synthesis' own (work_clock.CAPS) whose bounds (`lower`, `upper`) it
-    returned, if any: its cluster policies' largest (`reached_cluster_cap`), or the end of an
-    unbounded schedule run whole (SynthesisStats.stopped, belief_synthesis.py)."""
-    if reached_cluster_cap(stats, lower, upper):
+def own_cap(run: SynthesisResult) -> str | None:
+    """The cap of a synthesis' own (work_clock.CAPS) whose bounds it returned, if any, for a run of
+    either kind: a belief-MDP synthesis' cluster policies' largest (`reached_cluster_cap`), else
+    the cap its statistics name (`stopped`: the end of a belief-MDP synthesis' unbounded schedule
+    run whole, belief_synthesis.py, or a trust-state synthesis' own, JOINT_STOPS)."""
+    if reached_cluster_cap(run.stats, run.lower, run.upper):
         return "cluster cap"
-    if isinstance(stats, SynthesisStats) and stats.stopped in CAPS:
-        return stats.stopped
-    return None
+    return run.stats.stopped if run.stats.stopped in CAPS else None

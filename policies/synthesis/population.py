@@ -62,7 +62,7 @@ from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.synthesis.belief_synthesis import BeliefSynthesis, synthesize
 from trustroute.policies.synthesis.budget import MIN_RUN_SECONDS, RunSchedule, TimeBudget
-from trustroute.policies.synthesis.cluster_policy import belief_cap
+from trustroute.policies.synthesis.cluster_policy import own_cap
 from trustroute.policies.synthesis.refinement import reached_node_budget
 from trustroute.policies.synthesis.result import RoundProgress, SearchRun, SynthesisResult, SynthesisStats
 from trustroute.policies.synthesis.result import robust_progress as told_robust
@@ -289,14 +289,11 @@ def within_tau(values: Iterable[TypeValue], bound: float, tau: float) -> bool:
     return worst_type(values) >= bound - tau
 
 
-def run_end(run: SynthesisResult, cap: str | None = None) -> str:
-    """What ended a run of the schedule, in work_clock.stopped_by's words: "convergence", "node
-    budget", its own cap, else its limit (one of LIMITS: which one is the call's to name, from its
-    clock). The cap is `cap`, given by a caller that may hold a run of either kind (the answer of
-    trust_state_synthesis.synthesis.reached_cap, a layer above this one), else the belief-MDP
-    synthesis' own (`belief_cap`): this module's runs are of that kind alone."""
-    own = cap if cap is not None else belief_cap(run.stats, run.lower, run.upper)
-    return stopped_by(run.stats.converged, None, reached_node_budget(run.stats), own)
+def run_end(run: SynthesisResult) -> str:
+    """What ended a run of the schedule, of either kind, in work_clock.stopped_by's words:
+    "convergence", "node budget", its own cap (`own_cap`), else its limit (one of LIMITS: which
+    one is the call's to name, from its clock)."""
+    return stopped_by(run.stats.converged, None, reached_node_budget(run.stats), own_cap(run))
 
 
 def setup_seconds(result: BeliefSynthesis) -> float:

@@ -42,10 +42,15 @@ def robust_progress(on_iteration: RoundProgress | None, lower: Callable[[], floa
 
 
 class Statistics(Protocol):
-    """What every synthesis' statistics have: convergence, the policy's rows, and their JSON."""
+    """What every synthesis' statistics have: convergence, what ended the synthesis where it says
+    (a cap of its own, work_clock.CAPS, or an end of its kind; None where it does not say), the
+    policy's rows, and their JSON."""
 
     @property
     def converged(self) -> bool: ...
+
+    @property
+    def stopped(self) -> str | None: ...
 
     @property
     def policy_rows(self) -> int: ...

@@ -70,7 +70,6 @@ from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisS
 from trustroute.policies.trust_state_synthesis.synthesis import (
     EVALUATION_NODES,
     JointSynthesis,
-    reached_cap,
     synthesize_joint,
 )
 from trustroute.policies.work_clock import now as clock_now
@@ -138,7 +137,7 @@ def type_optimum_bounds(problem: Problem, settings: SynthesisSettings, schedule:
                          replace(settings, time_limit=schedule.capped_limit(TYPE_BOUND_SHARE),
                                  belief_rule="bayes"))
         schedule.finished(f"bound of type {t.name}'s own optimum", own.lower, own.upper,
-                          ended=run_end(own, reached_cap(own)))
+                          ended=run_end(own))
         bounds.append(own.upper)
     return tuple(bounds)
 
@@ -179,7 +178,7 @@ def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[Typ
                                 replace(settings, time_limit=schedule.next_limit()),
                                 on_iteration=candidate_progress)
         schedule.finished(candidate_name(prior), made.lower, made.upper,
-                          ended=run_end(made, reached_cap(made)))
+                          ended=run_end(made))
         policy = JointTablePolicy(made.policy.table, problem.pomdp, problem.spec, made.policy.guide_horizon,
                                   name="robust", certificate=Certificate(horizon=horizon),
                                   guide=made.policy.guide, reweight=reweighting(population, prior))
@@ -223,7 +222,7 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
     bayes = synthesize_joint(problem.pomdp, problem.spec, replace(settings, time_limit=limit),
                              on_iteration=told)
     schedule.finished("Bayes objective, the population's weights", bayes.lower, bayes.upper,
-                      ended=run_end(bayes, reached_cap(bayes)))
+                      ended=run_end(bayes))
     values = joint_type_values(problem, bayes.policy, evaluation_cap(horizon), belief_rule,
                                deadline=schedule.budget.deadline)
     found = PopulationSynthesis(

@@ -51,7 +51,6 @@ from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.routing.protocol import Certificate
 from trustroute.policies.routing.trust_state_table import JointPolicyTable, JointTablePolicy
 from trustroute.policies.synthesis.budget import TimeBudget
-from trustroute.policies.synthesis.cluster_policy import belief_cap
 from trustroute.policies.synthesis.result import Record, RoundProgress, SynthesisResult, record_dict
 from trustroute.policies.synthesis.rounding import joint_rounding, relative_margin, rounded_down, rounded_up
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
@@ -61,7 +60,7 @@ from trustroute.policies.trust_state_synthesis.search import (
     JointLimits,
     joint_search,
 )
-from trustroute.policies.work_clock import CAPS, work_clock
+from trustroute.policies.work_clock import work_clock
 
 FIRST_NODES = 500                  # nodes per level of the first round
 NODE_GROWTH = 4                    # nodes per level grow by this factor per round
@@ -172,21 +171,6 @@ def joint_margin(pomdp: TrustPOMDP, spec: Spec, belief_rule: BeliefRule, depth: 
     reported beside them, are rounded outward by."""
     rounding = joint_rounding(pomdp, compile_spec(spec, pomdp.town).dfa.n_states, belief_rule)
     return relative_margin(rounding, depth, belief_rule)
-
-
-def reached_joint_cap(stats: object) -> str | None:
-    """The cap (work_clock.CAPS) that ended a trust-state synthesis before its limits, if one did
-    (the statistics of other syntheses never say so)."""
-    return stats.stopped if isinstance(stats, JointSynthesisStats) and stats.stopped in CAPS else None
-
-
-def reached_cap(run: SynthesisResult) -> str | None:
-    """The cap of a synthesis' own (work_clock.CAPS) whose bounds it returned, if any, for a run of
-    either kind: a trust-state synthesis says which (`reached_joint_cap`), a belief-MDP synthesis
-    ends at its cluster policies' largest cap or at its unbounded schedule's end (`belief_cap`).
-    This layer is the lowest that knows both kinds; policies/synthesis/population.py `run_end`,
-    below it, knows the belief-MDP kind alone and takes this answer from the callers above it."""
-    return belief_cap(run.stats, run.lower, run.upper) or reached_joint_cap(run.stats)
 
 
 JointSynthesis: TypeAlias = SynthesisResult[JointTablePolicy, JointSynthesisStats]

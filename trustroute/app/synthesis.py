@@ -27,7 +27,7 @@ from trustroute.policies.routing.files import array_path, save_policy
 from trustroute.policies.routing.free import baseline_route, trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.synthesis.belief_synthesis import unbounded_schedule_note
-from trustroute.policies.synthesis.cluster_policy import CLUSTER_CAPS
+from trustroute.policies.synthesis.cluster_policy import CLUSTER_CAPS, own_cap
 from trustroute.policies.synthesis.population import (
     Objective,
     PopulationSynthesis,
@@ -44,7 +44,7 @@ from trustroute.policies.synthesis.settings import CLUSTER_MODES as SEARCH_CLUST
 from trustroute.policies.synthesis.settings import SynthesisSettings as SearchSettings
 from trustroute.policies.synthesize_spec import synthesize_for_population, synthesize_problem
 from trustroute.policies.trust_state_synthesis.population import certified_type_values
-from trustroute.policies.trust_state_synthesis.synthesis import joint_cap_note, reached_cap
+from trustroute.policies.trust_state_synthesis.synthesis import joint_cap_note
 from trustroute.policies.work_clock import CAPS, WorkClock, installed, stopped_by, work_clock
 
 
@@ -82,8 +82,8 @@ class SynthesisSettings(SearchSettings):
 
 def run_stop(result: SynthesisResult, clock: WorkClock | None) -> str:
     """What ended one synthesis run (work_clock.stopped_by): its convergence, its search's node
-    budget, a cap of its own (trust_state_synthesis.synthesis.reached_cap) or the limit of `clock`."""
-    return stopped_by(result.stats.converged, clock, reached_node_budget(result.stats), reached_cap(result))
+    budget, a cap of its own (synthesis/cluster_policy.py `own_cap`) or the limit of `clock`."""
+    return stopped_by(result.stats.converged, clock, reached_node_budget(result.stats), own_cap(result))
 
 
 def synthesize_single(problem: Problem, settings: SynthesisSettings,

@@ -292,25 +292,25 @@ def test_bounds_of_the_largest_cluster_cap_are_said_to_end_the_run():
 
 
 def test_one_answer_names_the_cap_of_a_run_of_either_kind():
-    """`reached_cap` (trust_state_synthesis/synthesis.py) answers for a belief-MDP run (its
+    """`own_cap` (synthesis/cluster_policy.py) answers for a belief-MDP run (its
     cluster policies' largest cap, its schedule's end) and for a trust-state run (the cap its
     statistics name); a run its limit ended has none."""
     from dataclasses import replace
     from types import SimpleNamespace
 
-    from trustroute.policies.synthesis.cluster_policy import CLUSTER_CAPS
-    from trustroute.policies.trust_state_synthesis.synthesis import JointSynthesisStats, reached_cap
+    from trustroute.policies.synthesis.cluster_policy import CLUSTER_CAPS, own_cap
+    from trustroute.policies.trust_state_synthesis.synthesis import JointSynthesisStats
 
     belief = _stats_ending_in_clusters(CLUSTER_CAPS[-1], 0.99, 0.999)
-    assert reached_cap(SimpleNamespace(stats=belief, lower=0.99, upper=0.999)) == "cluster cap"
-    assert reached_cap(SimpleNamespace(stats=belief, lower=0.995, upper=0.999)) is None
-    assert reached_cap(SimpleNamespace(stats=replace(belief, stopped="depth cap"), lower=0.5,
-                                       upper=0.999)) == "depth cap"
+    assert own_cap(SimpleNamespace(stats=belief, lower=0.99, upper=0.999)) == "cluster cap"
+    assert own_cap(SimpleNamespace(stats=belief, lower=0.995, upper=0.999)) is None
+    assert own_cap(SimpleNamespace(stats=replace(belief, stopped="depth cap"), lower=0.5,
+                                   upper=0.999)) == "depth cap"
     joint = JointSynthesisStats(belief_rule="bayes", converged=False, stopped="node cap", tau=1e-3, runs=(),
                                 policy_rows=0, policy_search_horizon=0, search_lower=0.0, policy_value=None)
-    assert reached_cap(SimpleNamespace(stats=joint, lower=0.5, upper=0.9)) == "node cap"
+    assert own_cap(SimpleNamespace(stats=joint, lower=0.5, upper=0.9)) == "node cap"
     deadline = replace(joint, stopped="deadline")
-    assert reached_cap(SimpleNamespace(stats=deadline, lower=0.5, upper=0.9)) is None
+    assert own_cap(SimpleNamespace(stats=deadline, lower=0.5, upper=0.9)) is None
 
 
 def test_a_work_limited_run_that_reached_the_wall_clock_names_the_time_limit_whatever_else():

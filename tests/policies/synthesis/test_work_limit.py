@@ -4,6 +4,7 @@ second) give the same bounds, runs and policy; the wall-clock time limit still s
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from pathlib import Path
@@ -192,7 +193,8 @@ def test_a_run_cut_by_its_limit_is_told_from_one_a_cap_or_convergence_ended(conv
     assert run_end(converged) == "convergence"
     short = trustroute.synthesize("phi1", horizon=10, work_limit=2_000, time_limit=SLOW)
     assert short.stopped_by == "work limit" and run_end(short) in LIMITS
-    assert run_end(short, cap="node cap") == "node cap"
+    capped = dataclasses.replace(short, stats=dataclasses.replace(short.stats, stopped="depth cap"))
+    assert run_end(capped) == "depth cap"
 
 
 def test_a_search_stopped_by_its_node_budget_says_so(capsys, tmp_path):
