@@ -25,7 +25,7 @@ for Storm's exact engine.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from fractions import Fraction
 
 import numpy as np
@@ -232,28 +232,47 @@ def explicit_product(pomdp: TrustPOMDP, spec: Spec, horizon: int | None = None,
     t_choice, t_target, t_prob, t_factor = (np.concatenate(a) for a in (tr_choice, tr_target, tr_prob,
                                                                         tr_factor))
 
-    # Restrict to the states reachable from begin, renumbered in state order.
+    # Every grid state, unreached ones included; `reached_part` keeps those reached from begin.
     n_all = 1 + n_grid
-    reached = _reached_from_begin(n_all, c_state[t_choice], t_target)
-    new_id = np.cumsum(reached) - 1
-    keep_choice = reached[c_state]
-    new_choice = np.cumsum(keep_choice) - 1
-    keep_tr = keep_choice[t_choice]
-    observation_key = np.zeros((n_all, 3), dtype=np.int64)          # (started, x, o, k) -> id
-    observation_key[1:] = np.stack([1 + gx, go, gk], axis=1)
-    observation_key[0] = (0, 0, 0)
-    _, observation = np.unique(observation_key[reached], axis=0, return_inverse=True)
+    # the observation (started, x, o, k) as one code, in the order of its fields
+    observation = np.zeros(n_all, dtype=np.int64)
+    observation[1:] = np.ravel_multi_index((1 + gx, go, gk), (1 + n_x, n_o, n_k))
     goal = np.zeros(n_all, dtype=bool)
     goal[1:] = np.asarray(dfa.accepting, dtype=bool)[gq]
     road, step = np.full(n_all, -1, dtype=np.int64), np.full(n_all, -1, dtype=np.int64)
     road[1:], step[1:] = gx, gk
+    return reached_part(ExplicitProduct(
+        horizon=horizon, observation=observation, goal=goal, choice_state=c_state,
+        choice_label=tuple(c_label.tolist()), transition_choice=t_choice, transition_target=t_target,
+        transition_probability=t_prob, transition_factor=t_factor,
+        exact_factors=exact_factors(pomdp, outcomes) if exact else (), road=road, step=step))
+
+
+def reached_part(product: ExplicitProduct) -> ExplicitProduct:
+    """The part of `product` reached from `begin` (state 0), as the class lays a product out: its
+    states renumbered in order, its choices in state order (a state's in the order given), its
+    observations numbered 0, 1, ... in the order of their codes. `product` may hold states never
+    reached, choices in any order and any integer codes of observations: what the enumeration of
+    the grid and a policy's chain (`induced_chain`) each build."""
+    c_state, t_choice = product.choice_state, product.transition_choice
+    reached = _reached_from_begin(product.n_states, c_state[t_choice], product.transition_target)
+    order = np.argsort(c_state, kind="stable")
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    new_id = np.cumsum(reached) - 1
+    keep_choice = reached[c_state[order]]
+    new_choice = np.cumsum(keep_choice) - 1
+    keep = reached[c_state[t_choice]]
     return ExplicitProduct(
-        horizon=horizon, observation=observation.ravel().astype(np.int64), goal=goal[reached],
-        choice_state=new_id[c_state[keep_choice]], choice_label=tuple(c_label[keep_choice].tolist()),
-        transition_choice=new_choice[t_choice[keep_tr]], transition_target=new_id[t_target[keep_tr]],
-        transition_probability=t_prob[keep_tr], transition_factor=t_factor[keep_tr],
-        exact_factors=exact_factors(pomdp, outcomes) if exact else (), road=road[reached],
-        step=step[reached])
+        horizon=product.horizon, goal=product.goal[reached],
+        observation=np.unique(product.observation[reached], return_inverse=True)[1].ravel().astype(np.int64),
+        choice_state=new_id[c_state[order][keep_choice]],
+        choice_label=tuple(np.asarray(product.choice_label, dtype=object)[order][keep_choice].tolist()),
+        transition_choice=new_choice[rank[t_choice[keep]]],
+        transition_target=new_id[product.transition_target[keep]],
+        transition_probability=product.transition_probability[keep],
+        transition_factor=product.transition_factor[keep], exact_factors=product.exact_factors,
+        road=product.road[reached], step=product.step[reached])
 
 
 def _reached_from_begin(n_states: int, source: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -297,7 +316,7 @@ def induced_chain(product: ExplicitProduct, choices: np.ndarray) -> ExplicitProd
     kept = np.zeros(product.choice_state.size, dtype=bool)
     kept[choices[choices >= 0]] = True
     keep_tr = kept[product.transition_choice]
-    # old choices first, then one new `end` choice per ending state; ordered by state below
+    # old choices first, then one new `end` choice per ending state (`reached_part` orders them by state)
     c_state = np.concatenate([product.choice_state[kept], ends])
     c_label = np.concatenate([np.asarray(product.choice_label, dtype=object)[kept],
                               np.full(ends.size, "end", dtype=object)])
@@ -307,22 +326,9 @@ def induced_chain(product: ExplicitProduct, choices: np.ndarray) -> ExplicitProd
     t_target = np.concatenate([product.transition_target[keep_tr], ends])
     t_prob = np.concatenate([product.transition_probability[keep_tr], np.ones(ends.size)])
     t_factor = np.concatenate([product.transition_factor[keep_tr], np.zeros(ends.size, dtype=np.int64)])
-    reached = _reached_from_begin(product.n_states, c_state[t_choice], t_target)
-    order = np.argsort(c_state, kind="stable")                      # one choice per state: by state
-    rank = np.empty_like(order)
-    rank[order] = np.arange(order.size)
-    new_id = np.cumsum(reached) - 1
-    keep_choice = reached[c_state[order]]
-    new_choice = np.cumsum(keep_choice) - 1
-    keep = reached[c_state[t_choice]]
-    return ExplicitProduct(
-        horizon=product.horizon, goal=product.goal[reached],
-        observation=np.unique(product.observation[reached], return_inverse=True)[1].ravel().astype(np.int64),
-        choice_state=new_id[c_state[order][keep_choice]],
-        choice_label=tuple(c_label[order][keep_choice].tolist()),
-        transition_choice=new_choice[rank[t_choice[keep]]], transition_target=new_id[t_target[keep]],
-        transition_probability=t_prob[keep], transition_factor=t_factor[keep],
-        exact_factors=product.exact_factors, road=product.road[reached], step=product.step[reached])
+    return reached_part(replace(product, choice_state=c_state, choice_label=tuple(c_label.tolist()),
+                                transition_choice=t_choice, transition_target=t_target,
+                                transition_probability=t_prob, transition_factor=t_factor))
 
 
 def exact_factors(pomdp: TrustPOMDP, outcomes: list[tuple[int, int]]) -> tuple[Fraction, ...]:
