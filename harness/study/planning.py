@@ -125,10 +125,11 @@ def simulate_studies(context: StudyContext, participants: int, studies: int, rng
     for s, spec in enumerate(specs):
         for c, condition in enumerate(conditions):
             setup = context.setup(spec, condition)
+            own = is_own_verdict(source, context, setup, drivers)
             result = simulate_batch(setup, context.policies[(spec, condition)], total, rng, drivers=drivers,
-                                    driver_index=index, report_accuracy=accuracy,
-                                    trace=not is_own_verdict(source, context, setup, drivers))
-            judged = source_satisfied(source, context, (spec, condition), setup, result, (drivers, index))
+                                    driver_index=index, report_accuracy=accuracy, trace=not own)
+            judged = (result.satisfied if own else
+                      source_satisfied(source, context, (spec, condition), setup, result, (drivers, index)))
             satisfied[:, :, s, c] = judged.reshape(studies, participants)
             reported[:, :, s, c] = np.asarray(result.mean_reported).reshape(studies, participants)
     return SimulatedStudies(participants=participants, specs=specs, conditions=conditions,
@@ -147,16 +148,15 @@ def check_plannable(config: StudyConfig) -> None:
 
 def source_satisfied(source: str, context: StudyContext, cell: tuple[str, str], setup: EpisodeSetup,
                      result: BatchResult, drivers: tuple[Sequence[DriverModel], np.ndarray]) -> np.ndarray:
-    """bool [n]: whether each episode of `result` (a `simulate_batch` of the (spec, condition)
-    `cell` with its `setup`, traced unless `source` is "filter") satisfied the spec on the belief
-    `source`, as the study's analysis judges a logged episode (docs/study.md, its item on
-    satisfaction from the logs): "filter" the AV's own verdict; "true" each episode's driver's exact
+    """bool [n]: whether each episode of `result` (a traced `simulate_batch` of the (spec, condition)
+    `cell` with its `setup`) satisfied the spec on the belief `source`, as the study's analysis
+    judges a logged episode (docs/study.md, its item on satisfaction from the logs), where the AV's
+    own verdict (`result.satisfied`) is not that judgement (`is_own_verdict`, which the caller asks
+    once, before it simulates, to know whether to trace): "true" each episode's driver's exact
     filter (`drivers`: the true models and each episode's index in them); "reference" the study's one
     filter for every condition (StudyContext.reference_filter; plan refuses a config's [drivers]);
     "reported" a point mass on the last report. The spec as written (belief atoms over trust) is
     read on the trust marginals."""
-    if is_own_verdict(source, context, setup, drivers[0]):
-        return result.satisfied
     trace = result.trace
     assert trace is not None, "simulate_batch(..., trace=True) gives the trace"
     av, town = setup.driver_model, context.town
