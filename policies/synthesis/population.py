@@ -182,6 +182,13 @@ class PopulationSynthesis:
         return worst_type(self.type_values)
 
 
+def with_run_counts(found: PopulationSynthesis, schedule: RunSchedule) -> PopulationSynthesis:
+    """`found` with the counts of its runs its schedule kept (the candidate priors not needed and
+    skipped, the runs cut and at their node budget), as a robust synthesis of either kind reports them."""
+    return replace(found, candidates_not_needed=schedule.not_needed, candidates_skipped=schedule.skipped,
+                   runs_cut=schedule.cut, runs_at_node_budget=schedule.at_node_budget)
+
+
 def evaluation_cap(horizon: int | None) -> int:
     """The junction cap per-type values are evaluated with: synthesis' horizon (unbounded: the
     episode cap, so the values are lower bounds of the unbounded ones)."""
@@ -474,14 +481,12 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
     result = SynthesisResult(policy=policy, lower=min(mixture, bayes.upper), upper=bayes.upper,
                              seconds=seconds, stats=replace(best_stats, objective="robust"),
                              horizon=horizon, belief_rule=belief_rule)
-    return PopulationSynthesis(
+    return with_run_counts(PopulationSynthesis(
         objective="robust", population=population, result=result, pomdp=pomdp, spec=lifted_spec,
         prior=tuple(float(p) for p in best_prior), type_values=best_values, lower=lower,
         upper=upper, seconds=seconds, bayes_lower=bayes.lower, bayes_upper=bayes.upper,
         bayes_type_values=bayes_values, candidates=candidates, type_upper=tuple(type_upper),
-        bayes_policy=bayes.policy, candidates_not_needed=schedule.not_needed,
-        candidates_skipped=schedule.skipped, runs_cut=schedule.cut,
-        runs_at_node_budget=schedule.at_node_budget)
+        bayes_policy=bayes.policy), schedule)
 
 
 def policy_name(synthesis: PopulationSynthesis) -> str:

@@ -61,6 +61,7 @@ from trustroute.policies.synthesis.population import (
     reweighting,
     run_count,
     run_end,
+    with_run_counts,
     within_tau,
     worst_type,
 )
@@ -243,9 +244,8 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
     mixture = min(mixture_lower(population.weights, best_values), bayes.upper)
     policy.lower, policy.upper = mixture, bayes.upper
     result = replace(bayes, policy=policy, lower=mixture, seconds=time.perf_counter() - started)
-    return replace(found, objective="robust", result=result, prior=tuple(float(p) for p in prior),
+    made = replace(found, objective="robust", result=result, prior=tuple(float(p) for p in prior),
                    type_values=best_values, lower=lower, upper=max(upper, lower),
                    seconds=time.perf_counter() - started, candidates=candidates, type_upper=type_upper,
-                   bayes_policy=bayes.policy, candidates_not_needed=schedule.not_needed,
-                   candidates_skipped=schedule.skipped, runs_cut=schedule.cut,
-                   runs_at_node_budget=schedule.at_node_budget)
+                   bayes_policy=bayes.policy)
+    return with_run_counts(made, schedule)
