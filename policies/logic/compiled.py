@@ -15,11 +15,10 @@ import numpy as np
 
 from trustroute.core.errors import InputError
 from trustroute.core.wording import shown_value
-from trustroute.networks.road_lookup import unknown_road_fix
 from trustroute.networks.town import Town
 from trustroute.policies.logic.dfa import DFA, build_dfa
 from trustroute.policies.logic.labelling import Labeller
-from trustroute.policies.logic.road_selectors import other_town_fix
+from trustroute.policies.logic.road_selectors import unknown_spec_road_fix
 from trustroute.policies.logic.spec import Spec
 
 
@@ -95,7 +94,7 @@ def compile_spec(spec: Spec, town: Town) -> CompiledSpec:
         if spec.start not in town.states:
             raise InputError(spec.source_path or spec.name, "start",
                              f"start road {shown_value(spec.start)} is not a directed road of the town",
-                             other_town_fix(unknown_road_fix(town, spec.start)))
+                             unknown_spec_road_fix(town, spec.start))
         dfa = build_dfa(spec)
         labeller = Labeller(spec, dfa, town)
         compiled = CompiledSpec(spec=spec, town=town, dfa=dfa, labeller=labeller,

@@ -33,10 +33,9 @@ from __future__ import annotations
 import numpy as np
 
 from trustroute.core.errors import InputError
-from trustroute.networks.road_lookup import unknown_road_fix
 from trustroute.networks.town import Town
 from trustroute.policies.logic.dfa import DFA
-from trustroute.policies.logic.road_selectors import other_town_fix
+from trustroute.policies.logic.road_selectors import unknown_spec_road_fix
 from trustroute.policies.logic.spec import N_TRUST_LEVELS, Spec, check_coefficient_length
 
 UNIT_ROUNDOFF = 2.0 ** -53
@@ -87,7 +86,7 @@ class Labeller:
                     if road not in road_index:
                         raise InputError(spec.source_path or spec.name, f"states.{atom}",
                                          f"'{road}' is not a directed road of the town",
-                                         other_town_fix(unknown_road_fix(town, road)))
+                                         unknown_spec_road_fix(town, road))
                     row[road_index[road]] = True
                 state_columns.append(column)
                 membership.append(row)
@@ -108,7 +107,7 @@ class Labeller:
                     if road not in road_index:
                         raise InputError(spec.source_path or spec.name, f"trust_states.{atom}",
                                          f"'{road}' is not a directed road of the town",
-                                         other_town_fix(unknown_road_fix(town, road)))
+                                         unknown_spec_road_fix(town, road))
                 trust_roads.append(np.isin(np.arange(len(town.states)),
                                            [road_index[r] for r in roads]))
                 trust_levels.append([level in definition.trust for level in range(1, N_TRUST_LEVELS + 1)])

@@ -6,7 +6,7 @@ by junction or street")."""
 from __future__ import annotations
 
 from trustroute.core.errors import InputError
-from trustroute.networks.road_lookup import roads_into, roads_on_street
+from trustroute.networks.road_lookup import roads_into, roads_on_street, unknown_road_fix
 from trustroute.networks.town import Town
 
 STATE_SELECTOR_KEYS = ("junction", "street")
@@ -20,6 +20,13 @@ def other_town_fix(fix: str) -> str:
     """The fix for a name of a spec's (a road, junction or street) the town lacks: the town the
     spec is written for first, then `fix`, a name of this town."""
     return f"{OTHER_TOWN_FIX}, or {fix}"
+
+
+def unknown_spec_road_fix(town: Town, road: str) -> str:
+    """The fix for a directed road of a spec's (its start, a road of a waypoint set or of a trust
+    state) that `town` lacks: the town the spec is written for, or the roads of this town
+    `unknown_road_fix` names."""
+    return other_town_fix(unknown_road_fix(town, road))
 
 
 def _selector_names(entry: dict, atom: str, place: str, source: str) -> tuple[str, list[str]]:

@@ -44,7 +44,6 @@ from trustroute.core.fields import (
 from trustroute.core.packaged import SPECS
 from trustroute.core.validation import FILE_NAME, FILE_NAME_RULE, parse_toml, read_text
 from trustroute.core.wording import counted, shown_value
-from trustroute.networks.road_lookup import unknown_road_fix
 from trustroute.networks.town import Town
 from trustroute.policies.logic.formula import (
     ATOM_PATTERN,
@@ -58,7 +57,7 @@ from trustroute.policies.logic.formula import (
     map_literals,
     parse_formula,
 )
-from trustroute.policies.logic.road_selectors import other_town_fix, selected_roads
+from trustroute.policies.logic.road_selectors import selected_roads, unknown_spec_road_fix
 
 N_TRUST_LEVELS = 7  # the Muir scale 1..7 of the default driver model (any number >= 2 is accepted)
 # The parser and DFA construction recurse over the formula; these limits keep them far from
@@ -376,7 +375,7 @@ def _check_roads(roads: list[str], owner: str, place: Callable[[str], str], sour
         if town is not None and road not in town.states:
             raise InputError(source, place(road), f"{owner}: '{road}' is not a directed road of the town "
                              f"({town.source_path or 'given town'})",
-                             other_town_fix(unknown_road_fix(town, road)))
+                             unknown_spec_road_fix(town, road))
 
 
 def _state_atoms(raw: Mapping[str, object], spec: _SpecSource,
@@ -498,7 +497,7 @@ def _check_start(start: str, spec: _SpecSource, town: Town | None) -> None:
     if town is not None and start not in town.states:
         raise spec.error("start", needles, f"start road '{start}' is not a directed road of the "
                          f"town ({town.source_path or 'given town'})",
-                         other_town_fix(unknown_road_fix(town, start)))
+                         unknown_spec_road_fix(town, start))
     if "-" not in start:
         raise spec.error("start", needles, f"start '{start}' is not a directed road \"U-V\"",
                          'write start = "E-A"')
