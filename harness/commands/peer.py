@@ -6,7 +6,10 @@ discretisation (upper bound, at --resolution) on the exported product; ours is t
 joint beliefs of policies/trust_state_synthesis/search.py (exact for --horizon H; for the unbounded objective
 to --depth junctions with relaxation bounds at the leaves). `trustroute peer paynt SPEC` runs
 PAYNT's finite-state controller synthesis on the same product: the value of the controller it
-finds is a lower bound of Pr_max (policies/peer/paynt.py). Needs the optional `[peer]` extra.
+finds is a lower bound of Pr_max (policies/peer/paynt.py). `trustroute peer storm SPEC --exact`
+values the trust-free baseline route's policy in Storm's exact engine instead: the rational beside
+our certified value of the route (docs/peers.md, "Storm's exact engine: the value of a fixed
+policy"). Needs the optional `[peer]` extra.
 """
 
 from __future__ import annotations
@@ -22,9 +25,10 @@ from trustroute.app.peers import (
     ComparedProblem,
     paynt_comparison,
     storm_comparison,
+    storm_exact_comparison,
 )
 from trustroute.core import ranges
-from trustroute.core.wording import interval, lower_text
+from trustroute.core.wording import counted, interval, lower_text
 from trustroute.harness.commands.inputs import driver_field, spec_argument, town_field
 from trustroute.harness.commands.option_groups import option, takes
 from trustroute.harness.commands.options import Checked
@@ -70,6 +74,11 @@ class StormLimits:
     time_limit: float = peer_time_limit("Seconds of Storm's belief unfolding (lower bound).")
     resolution: int = option("--resolution", type=Checked(ranges.RESOLUTION), default=2, show_default=True,
                              help="Storm's discretisation resolution (upper bound).")
+    exact: bool = option(
+        "--exact", is_flag=True,
+        help="Instead of the bounds: the trust-free baseline route's value in Storm's exact engine, a "
+             "rational, beside our certified value of the route (--horizon defaults to the route's "
+             "junctions; --time-limit, --resolution, --depth and --max-nodes are not used).")
 
 
 @dataclass(frozen=True)
@@ -103,10 +112,38 @@ def peer() -> None:
 @spec_argument()
 @takes(problem=PeerProblem, limits=StormLimits, ours=OurSide)
 def storm(spec_path: str, problem: PeerProblem, limits: StormLimits, ours: OurSide) -> None:
-    """Storm's [lower, upper] and time beside ours, for SPEC."""
+    """Storm's [lower, upper] and time beside ours, for SPEC (--exact: a route's exact value)."""
+    if limits.exact:
+        found = storm_exact_comparison(problem.compared(spec_path), progress=not ours.as_json)
+        emit(ours.as_json, found, [] if ours.as_json else storm_exact_lines(found))
+        return
     result = storm_comparison(problem.compared(spec_path), limits.time_limit, limits.resolution, ours.depth,
                               ours.max_nodes, progress=not ours.as_json)
     emit(ours.as_json, result, [] if ours.as_json else storm_lines(result))
+
+
+# A rational longer than this is told by its size: the packaged model's rows divided by their
+# sums give numerators and denominators of hundreds of digits, which --json gives whole.
+RATIONAL_SHOWN = 80
+
+
+def rational_text(value: str) -> str:
+    """An exact value "p/q" as text: whole when short, else the digits of p and q."""
+    if len(value) <= RATIONAL_SHOWN:
+        return value
+    numerator, denominator = value.split("/")
+    return f"a rational of {len(numerator)} / {len(denominator)} digits (whole in --json)"
+
+
+def storm_exact_lines(result: dict) -> list[str]:
+    """Storm's exact value of the baseline route as text: the rational beside our certified value."""
+    exact = result["storm_exact"]
+    return [problem_line(result),
+            f"  route  {' '.join(result['route'])} ({counted(len(result['route']) - 1, 'junction')}), "
+            f"a chain of {result['chain_states']:,} states",
+            f"  storm  exact {exact['float']:.12f} (to 12 decimals) = {rational_text(exact['value'])}",
+            ours_line(result["ours"]),
+            f"  within ours: {'yes' if result['within_ours'] else 'NO'}"]
 
 
 def storm_lines(result: dict) -> list[str]:

@@ -147,3 +147,48 @@ def test_the_text_rounds_paynts_lower_bound_down_as_ours():
     lines = paynt_lines(result)
     assert "  paynt  0.999999  " in lines[1], lines
     assert "  ours   [0.999999, 1.000000]" in lines[2], lines
+
+
+@pytest.mark.parametrize("extra", [0, 2])
+def test_storm_exact_of_the_baseline_route_equals_our_exact_value_as_a_fraction(capsys, tmp_path, town,
+                                                                               driver, extra):
+    """`peer storm --exact` end to end: with the packaged model to 3 decimals given as --driver
+    (its rows sum to 1 as printed, so the exact process is the route's chain), the rational the
+    command prints is our exact value of the baseline route (tests/policies/synthesis/exact_joint.py,
+    in integers) as a Fraction, inside our certified [L, U]; a longer --horizon does not move it."""
+    pytest.importorskip("stormpy", reason="needs the optional extra: pip install -e '.[peer]'")
+    from fractions import Fraction
+
+    from tests.policies.peer.decimal_model import RoutePolicy, decimal_model
+    from tests.policies.synthesis.exact_joint import exact_joint_value
+    from trustroute.participants.driver_model import load_driver_model
+    from trustroute.policies.logic.spec import load_spec
+    from trustroute.policies.model.trust_pomdp import build_pomdp
+    from trustroute.policies.routing.free import baseline_route
+
+    model_path = tmp_path / "driver_to_3_decimals.json"
+    model_path.write_text(json.dumps(decimal_model(driver).to_dict()))
+    spec = load_spec("specs/phi1_trust.toml", town)
+    route = baseline_route(town, spec)
+    horizon = len(route) - 1 + extra
+    args = ["peer", "storm", "specs/phi1_trust.toml", "--driver", str(model_path), "--exact",
+            *(["--horizon", str(horizon)] if extra else [])]
+    code, out, err = run_cli(capsys, *args, "--json")
+    assert code == 0, err
+    result = json.loads(out)
+    storm = Fraction(result["storm_exact"]["value"])
+    ours = exact_joint_value(build_pomdp(town, load_driver_model(model_path)), spec, horizon,
+                             policy=RoutePolicy(town, route))
+    assert isinstance(ours, Fraction) and storm == ours, (float(storm), float(ours))
+    assert 0 < storm < 1 and result["route"] == route and result["horizon"] == horizon
+    assert Fraction(result["ours"]["lower"]) <= storm <= Fraction(result["ours"]["upper"])
+    assert result["within_ours"]
+    code, out, _ = run_cli(capsys, *args)
+    assert code == 0 and f"= {storm.numerator}/{storm.denominator}" in out and "within ours: yes" in out
+
+
+def test_storm_exact_with_a_horizon_that_cuts_the_route_is_one_line_and_exit_2(capsys):
+    pytest.importorskip("stormpy", reason="needs the optional extra: pip install -e '.[peer]'")
+    code, out, err = run_cli(capsys, "peer", "storm", "specs/phi1_trust.toml", "--exact", "--horizon", "5")
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert "--horizon: the baseline route drives 6 junctions" in err and "pass --horizon 6 or more" in err

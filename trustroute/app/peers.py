@@ -1,7 +1,9 @@
 """The independent peers beside ours on one problem (docs/peers.md): the problem loaded as every
 command loads it, exported as the explicit product a peer is given, and both sides' bounds;
 `trustroute peer storm` and `trustroute peer paynt` print them. The peers themselves are the
-optional `[peer]` extra, imported only when a comparison runs. Each step after loading (the
+optional `[peer]` extra, imported only when a comparison runs. `trustroute peer storm --exact`
+values one fixed policy instead, the trust-free baseline route's, in Storm's exact engine: its
+rational beside our certified value of the same route (`trustroute baseline`). Each step after loading (the
 export, the peer, ours) reports nothing while it runs, so with `progress` a line on stderr names the
 step under way every few seconds once they have run 2 s (`step_progress`); the inputs are loaded and
 checked before, so that bad input stays one line."""
@@ -10,12 +12,22 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from fractions import Fraction
 from typing import Any
 
 from trustroute.app.inputs import load_inputs
+from trustroute.app.problem import compile_problem
+from trustroute.app.synthesis import baseline
+from trustroute.core.errors import InputError
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.peer.paynt import MAX_PRODUCT_STATES, require_paynt, run_paynt
-from trustroute.policies.peer.product_pomdp import ExplicitProduct, check_exportable, explicit_product
+from trustroute.policies.peer.product_pomdp import (
+    ExplicitProduct,
+    check_exportable,
+    explicit_product,
+    induced_chain,
+    route_choices,
+)
 from trustroute.policies.resolve import step_progress
 from trustroute.policies.trust_state_synthesis.search import JointLimits, joint_bounds
 
@@ -86,3 +98,44 @@ def paynt_comparison(problem: ComparedProblem, time_limit: float, max_states: in
         depth, max_nodes, progress)
     return {**fields, "paynt": paynt.to_dict(), "ours": ours.to_dict(),
             "within_ours": bool(paynt.lower <= ours.upper + paynt.precision)}
+
+
+def exact_horizon(problem: ComparedProblem, source: str, junctions: int) -> int:
+    """The step bound of the product an exact run exports for a route of `junctions` junctions:
+    --horizon, else the route's own (beyond it the policy has ended the episode, so a longer one
+    gives the same value); an InputError for a --horizon that would cut the route short."""
+    if problem.horizon is None:
+        return junctions
+    if problem.horizon < junctions:
+        raise InputError(source, "--horizon", f"the baseline route drives {junctions} junctions, more "
+                         f"than --horizon {problem.horizon}: Storm would value the route cut short",
+                         f"pass --horizon {junctions} or more, or leave it out for the route's own")
+    return problem.horizon
+
+
+def storm_exact_comparison(problem: ComparedProblem, progress: bool = False) -> dict:
+    """Storm's exact value (a rational) of the policy that drives the trust-free baseline route,
+    on the chain that policy makes of the product (`induced_chain`), beside our certified [L, U]
+    of the same route (`baseline`), JSON-ready: the rational as its text, "p/q" (or "p")."""
+    from trustroute.policies.peer.storm import require_storm, storm_exact_value
+
+    require_storm("trustroute peer storm --exact")
+    inputs = load_inputs(problem.spec_path, problem.town_path, problem.driver_path)
+    check_exportable(inputs.spec)
+    compiled = compile_problem(inputs)
+    spec, pomdp = compiled.spec, compiled.pomdp
+    with step_progress("peer storm", progress) as step:
+        step("our evaluation of the baseline route")
+        ours = baseline(compiled)
+        horizon = exact_horizon(problem, spec.source_path or spec.name, len(ours.route) - 1)
+        step("exporting the product POMDP")
+        product = explicit_product(pomdp, spec, horizon, exact=True)
+        chain = induced_chain(product, route_choices(product, pomdp, ours.route))
+        step(f"Storm's exact engine on {chain.n_states:,} chain states")
+        value = storm_exact_value(chain)
+    lower, upper = ours.value.lower, ours.value.upper
+    return {"spec": spec.name, "file": spec.source_path, "horizon": horizon,
+            "product_states": product.n_states, "route": ours.route, "chain_states": chain.n_states,
+            "storm_exact": {"value": str(value), "float": float(value)},
+            "ours": {"lower": lower, "upper": upper, "gap": upper - lower, "seconds": ours.value.seconds},
+            "within_ours": bool(Fraction(lower) <= value <= Fraction(upper))}

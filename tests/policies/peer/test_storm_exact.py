@@ -23,10 +23,10 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
+from tests.policies.peer.decimal_model import RoutePolicy, decimal_model
 from tests.policies.synthesis.exact_joint import exact_joint_value
 from trustroute.app.problem import load_problem
 from trustroute.app.synthesis import baseline
-from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import load_spec, spec_from_text, state_only_projection
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.peer.product_pomdp import explicit_product, induced_chain, route_choices
@@ -55,26 +55,11 @@ SPECS = {"phi1_trust": "v3", "phi2_trust": "v6"}
 EXTRA_JUNCTIONS = (0, 6)   # horizons: the baseline route's junctions, and 6 more of loops
 
 
-def rounded(values: np.ndarray) -> np.ndarray:
-    """Each row of probabilities to 3 decimals, the remainder on its largest entry: the row sums
-    to 1 as the decimals it prints as."""
-    rows = np.rint(values.reshape(-1, values.shape[-1]) * 1000).astype(np.int64)
-    rows[np.arange(rows.shape[0]), rows.argmax(axis=1)] += 1000 - rows.sum(axis=1)
-    return (rows / 1000).reshape(values.shape)
-
-
 @pytest.fixture(scope="module")
 def decimal_pomdp(town, driver):
     """The packaged model on the paper's town, its takeover probabilities and trust transitions
     to 3 decimals, every transition row summing to 1 as printed."""
-    model = DriverModel(trust_levels=driver.trust_levels, incident_types=driver.incident_types,
-                        takeover_probability=np.rint(driver.takeover_probability * 1000) / 1000,
-                        failure_probability=driver.failure_probability,
-                        trust_transition=rounded(driver.trust_transition),
-                        initial_belief=driver.initial_belief,
-                        trust_free_takeover_probability=dict(driver.trust_free_takeover_probability),
-                        source_path="<driver model to 3 decimals>")
-    return build_pomdp(town, model)
+    return build_pomdp(town, decimal_model(driver))
 
 
 def paper_spec(name: str, town, trust: bool):
@@ -106,16 +91,6 @@ def loop_route(town, spec, targets: str, horizon: int) -> list[str]:
             way.append(before[way[-1]])
         route += way[::-1]
     return route[:horizon + 1]
-
-
-class RoutePolicy:
-    """The slots of `route` for exact_joint_value (-1 past its last road: the episode ends)."""
-
-    def __init__(self, town, route: list[str]) -> None:
-        self.slots = [list(town.successors(a)).index(b) for a, b in zip(route, route[1:], strict=False)]
-
-    def action_slots(self, t: int, x: np.ndarray, joint: np.ndarray, beliefs: np.ndarray) -> np.ndarray:
-        return np.full(x.shape, self.slots[t] if t < len(self.slots) else -1)
 
 
 def storm_route_value(pomdp, spec, route: list[str], horizon: int) -> Fraction:
