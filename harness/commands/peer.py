@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import click
+from click.core import ParameterSource
 
 from trustroute.app.peers import (
     DEFAULT_MAX_NODES,
@@ -28,6 +29,7 @@ from trustroute.app.peers import (
     storm_exact_comparison,
 )
 from trustroute.core import ranges
+from trustroute.core.errors import InputError
 from trustroute.core.wording import counted, interval, lower_text
 from trustroute.harness.commands.inputs import driver_field, spec_argument, town_field
 from trustroute.harness.commands.option_groups import option, takes
@@ -78,7 +80,7 @@ class StormLimits:
         "--exact", is_flag=True,
         help="Instead of the bounds: the trust-free baseline route's value in Storm's exact engine, a "
              "rational, beside our certified value of the route (--horizon defaults to the route's "
-             "junctions; --time-limit, --resolution, --depth and --max-nodes are not used).")
+             "junctions; --time-limit, --resolution, --depth and --max-nodes are refused).")
 
 
 @dataclass(frozen=True)
@@ -114,12 +116,29 @@ def peer() -> None:
 def storm(spec_path: str, problem: PeerProblem, limits: StormLimits, ours: OurSide) -> None:
     """Storm's [lower, upper] and time beside ours, for SPEC (--exact: a route's exact value)."""
     if limits.exact:
+        refuse_unused_with_exact()
         found = storm_exact_comparison(problem.compared(spec_path), progress=not ours.as_json)
         emit(ours.as_json, found, [] if ours.as_json else storm_exact_lines(found))
         return
     result = storm_comparison(problem.compared(spec_path), limits.time_limit, limits.resolution, ours.depth,
                               ours.max_nodes, progress=not ours.as_json)
     emit(ours.as_json, result, [] if ours.as_json else storm_lines(result))
+
+
+# The options a fixed policy's exact value does not use: given with --exact, each is refused.
+NOT_WITH_EXACT = {"time_limit": "--time-limit", "resolution": "--resolution", "depth": "--depth",
+                  "max_nodes": "--max-nodes"}
+
+
+def refuse_unused_with_exact() -> None:
+    """One line, exit 2, for an option of the bounds given with --exact, which would not use it."""
+    context = click.get_current_context()
+    given = [flag for name, flag in NOT_WITH_EXACT.items()
+             if context.get_parameter_source(name) not in (None, ParameterSource.DEFAULT)]
+    if given:
+        raise InputError("--exact", "", f"{', '.join(given)} {'is' if len(given) == 1 else 'are'} not "
+                         "used by the exact value of a fixed route",
+                         "drop it, or drop --exact for Storm's bounds beside ours")
 
 
 # A rational longer than this is told by its size: the packaged model's rows divided by their

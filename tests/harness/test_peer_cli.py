@@ -192,3 +192,13 @@ def test_storm_exact_with_a_horizon_that_cuts_the_route_is_one_line_and_exit_2(c
     code, out, err = run_cli(capsys, "peer", "storm", "specs/phi1_trust.toml", "--exact", "--horizon", "5")
     assert code == 2 and out == "" and err.count("\n") == 1
     assert "--horizon: the baseline route drives 6 junctions" in err and "pass --horizon 6 or more" in err
+
+
+@pytest.mark.parametrize("given", [["--time-limit", "5"], ["--depth", "4", "--max-nodes", "100"],
+                                   ["--resolution", "2"]])
+def test_storm_exact_refuses_the_options_of_the_bounds_it_would_not_use(capsys, given):
+    """An option of the bounds given with --exact (its default too, written out) is one line and
+    exit 2 naming it, before any model is built."""
+    code, out, err = run_cli(capsys, "peer", "storm", "specs/phi1_trust.toml", "--exact", *given)
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert all(flag in err for flag in given if flag.startswith("--")) and "drop --exact" in err
