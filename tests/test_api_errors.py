@@ -8,6 +8,7 @@ import pytest
 import trustroute
 from trustroute.app.runs import EpisodeSettings
 from trustroute.core.errors import InputError
+from trustroute.harness.simulation.sumo_start import SumoConfig
 
 STUDY = {"study": {"participants": 1, "seed": 1, "engine": "model", "specs": ["phi1"],
                    "conditions": ["free"]}}
@@ -22,6 +23,10 @@ POPULATION = "driver_population_three_types"
      "initial_trust: 0 is not a trust level"),
     (lambda: trustroute.run_episode("phi1", engine="model", initial_trust=0),
      "initial_trust: 0 is not a trust level"),
+    (lambda: trustroute.run_episode("phi1", engine="model", sumo=SumoConfig()),
+     "sumo: a SUMO configuration needs the SUMO engine, not 'model'"),
+    (lambda: trustroute.run_episode("phi1", engine="model", observer=print),
+     "observer: an observer of SUMO's steps needs the SUMO engine, not 'model'"),
 ])
 def test_api_errors_name_keyword_arguments(call, named):
     with pytest.raises(InputError, match=named) as caught:

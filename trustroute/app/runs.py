@@ -50,6 +50,8 @@ class EpisodeSettings:
         engine = engine_named(self.engine, "--engine", simulated=True)
         check_sumo_only(engine, self.rrd, "a Rerun recording", "--rrd")
         check_sumo_only(engine, self.net, "a SUMO net", "--net")
+        check_sumo_only(engine, self.sumo, "a SUMO configuration", "EpisodeSettings", "sumo")
+        check_sumo_only(engine, self.observer, "an observer of SUMO's steps", "EpisodeSettings", "observer")
 
 
 @dataclass(frozen=True)
