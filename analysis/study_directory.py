@@ -25,23 +25,29 @@ from trustroute.core.dataset import (
     read_roads,
 )
 from trustroute.core.errors import InputError
-from trustroute.core.package import table_path
+from trustroute.core.package import table_path, verify_package
 from trustroute.harness.study.context import load_study_inputs
 from trustroute.harness.study.inputs import MANIFEST_FIX, relocated_config, spec_path, verify_inputs
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
 
+# what `load_study` reads: (manifest, episodes, roads)
+LoadedStudy = tuple[dict, pd.DataFrame, pd.DataFrame]
 
-def load_study(study_dir: Path, package: bool = False) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
+
+def load_study(study_dir: Path, package: bool = False) -> LoadedStudy:
     """(manifest, episodes, roads) of a consolidated study, read through trustroute.core.dataset;
     the manifest's config names the study directory's own copies of its inputs (absolute paths
     where the directory lies, harness/study/inputs.py), checked against their hashes, and the
     tables are checked against those inputs (module docstring). `package`: or of a package
-    `trustroute export` wrote, checked against its checksums (`read_manifest`)."""
+    `trustroute export` wrote, checked against its checksums (`verify_package`), which cover its
+    manifest and its inputs/ as well: their hashes are not checked a second time."""
     study_dir = Path(study_dir)
-    manifest = read_manifest(study_dir, package)
-    verify_inputs(manifest, study_dir)
+    packaged = package and verify_package(study_dir)
+    manifest = read_manifest(study_dir, packaged)
+    if not packaged:
+        verify_inputs(manifest, study_dir)
     manifest = {**manifest, "config": relocated_config(manifest.get("config") or {}, study_dir)}
     town, driver, specs = study_inputs(manifest, study_dir)
     episodes = read_episodes(study_dir, trust_levels=driver.trust_levels)

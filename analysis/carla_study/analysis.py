@@ -40,7 +40,7 @@ from trustroute.analysis.satisfaction import (
     REPORTED_TRUST_LABEL,
     satisfaction_by_source,
 )
-from trustroute.analysis.study_directory import load_study, study_inputs
+from trustroute.analysis.study_directory import LoadedStudy, load_study, study_inputs
 from trustroute.core.dataset import REPORT_HTML_FILE, REPORT_MARKDOWN_FILE
 from trustroute.core.wording import counted
 from trustroute.policies.belief.problem import reads_hidden_trust
@@ -251,9 +251,11 @@ def with_real_columns(
     return episodes.merge(real_episodes, on="episode_id", how="left"), roads
 
 
-def real_study_analysis(study_dir: Path) -> RealStudyAnalysis:
+def real_study_analysis(study_dir: Path, loaded: LoadedStudy | None = None) -> RealStudyAnalysis:
+    """The real-study analysis of an imported study; `loaded`: the study as `load_study` read it
+    (read here when not given)."""
     study_dir = Path(study_dir)
-    manifest, episodes, roads = load_study(study_dir)
+    manifest, episodes, roads = load_study(study_dir) if loaded is None else loaded
     episodes, roads = with_real_columns(study_dir, episodes, roads)
     town, driver, specs = study_inputs(manifest, study_dir)
     ticks = read_real_table(study_dir, "ticks")

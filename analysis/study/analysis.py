@@ -72,7 +72,7 @@ from trustroute.analysis.study.paper_comparison import is_paper_comparable, pape
 from trustroute.analysis.study.per_type import per_type_tables
 from trustroute.analysis.study.questionnaires import questionnaire_tables
 from trustroute.analysis.study.sensitivity import sensitivity_table
-from trustroute.analysis.study_directory import load_study, study_inputs
+from trustroute.analysis.study_directory import LoadedStudy, load_study, study_inputs
 from trustroute.core.errors import InputError
 from trustroute.core.package import is_package
 from trustroute.core.wording import shown_value
@@ -191,11 +191,12 @@ def source_satisfaction(study_dir: Path, manifest: dict, episodes: pd.DataFrame,
     return satisfaction, missing
 
 
-def study_analysis(study_dir: Path, belief_source: str | None = None,
-                   resamples: int = 10_000) -> StudyAnalysis:
+def study_analysis(study_dir: Path, belief_source: str | None = None, resamples: int = 10_000,
+                   loaded: LoadedStudy | None = None) -> StudyAnalysis:
     """The analysis of `study_dir` on `belief_source` (default: `default_belief_source`, common to
-    every condition)."""
-    manifest, episodes, roads = load_study(study_dir, package=True)
+    every condition). `loaded`: the study as `load_study(study_dir, package=True)` read it, so
+    that a command analysing it on several sources reads and checks it once."""
+    manifest, episodes, roads = load_study(study_dir, package=True) if loaded is None else loaded
     chosen = belief_source is not None or declared_belief_source(manifest) is not None
     belief_source = default_belief_source(manifest) if belief_source is None else belief_source
     if belief_source not in BELIEF_SOURCES:

@@ -31,8 +31,8 @@ from trustroute.analysis.study.display import (
     table_title,
 )
 from trustroute.analysis.study.plots import write_plots
-from trustroute.analysis.study_directory import study_inputs
-from trustroute.core.dataset import REPORT_HTML_FILE, REPORT_MARKDOWN_FILE, read_roads
+from trustroute.analysis.study_directory import LoadedStudy, load_study, study_inputs
+from trustroute.core.dataset import REPORT_HTML_FILE, REPORT_MARKDOWN_FILE
 from trustroute.core.wording import counted
 
 NOTES = [
@@ -197,17 +197,19 @@ def _analysis_view(analysis: StudyAnalysis) -> dict:
 
 
 def write_report(study_dir: Path, analysis: StudyAnalysis | None = None,
-                 out: Path | None = None) -> ReportPaths:
+                 out: Path | None = None, loaded: LoadedStudy | None = None) -> ReportPaths:
     """Analyse (unless given) and write report.md, report.html and plots/ in `out` (default: the
-    study directory)."""
+    study directory). `loaded`: the study as `analysis` read it (`study_analysis`), so that the
+    report's second analysis reads and checks nothing again; read here when not given."""
     study_dir = Path(study_dir)
     folder = study_dir if out is None else Path(out)
     folder.mkdir(parents=True, exist_ok=True)
-    primary = analysis if analysis is not None else study_analysis(study_dir)
+    loaded = load_study(study_dir, package=True) if loaded is None else loaded
+    primary = analysis if analysis is not None else study_analysis(study_dir, loaded=loaded)
     default = default_belief_source(primary.manifest)
-    secondary = study_analysis(study_dir, second_source(primary))
+    secondary = study_analysis(study_dir, second_source(primary), loaded=loaded)
     town, _, specs = study_inputs(primary.manifest, study_dir)
-    roads = read_roads(study_dir, ["episode_id", "index", "directed_road", "trust_after", "reported_trust"])
+    roads = loaded[2][["episode_id", "index", "directed_road", "trust_after", "reported_trust"]]
     plots = write_plots(folder, town, primary, roads, specs)
     failures = primary.manifest.get("failed_episodes", [])
     context = {

@@ -98,11 +98,11 @@ def demo(ctx: click.Context, out: str, workers: int | None, engine: str, partici
     if run.failed:
         click.echo(failed_line(run, "rerun the demo to retry them"), err=True)
         ctx.exit(1)
-    from trustroute.analysis.study.analysis import study_analysis
-    from trustroute.analysis.study.report import write_report
+    from trustroute.app.analysis import analyze_study
 
-    analysis = study_analysis(run.study_dir)
-    written = write_report(run.study_dir, analysis=analysis)
+    analyzed = analyze_study(run.study_dir, None, report=True)
+    analysis, written = analyzed.analysis, analyzed.report
+    assert written is not None   # asked for
     paths = {**dataset_paths(run.study_dir, manifest), **report_paths(written)}
     lines = [
         "",

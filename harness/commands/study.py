@@ -106,11 +106,11 @@ def study(ctx: click.Context, config_path: str, options: StudyOptions) -> None:
                "ran": run.ran, "retried": run.retried, "failed": run.failed, "backend": run.backend,
                "seconds": run.seconds}
     if not options.no_report and (not run.failed or options.report_anyway):
-        from trustroute.analysis.study.analysis import study_analysis
-        from trustroute.analysis.study.report import write_report
+        from trustroute.app.analysis import analyze_study
 
-        analysis = study_analysis(run.study_dir)
-        written = write_report(run.study_dir, analysis=analysis)
+        analyzed = analyze_study(run.study_dir, None, report=True)
+        analysis, written = analyzed.analysis, analyzed.report
+        assert written is not None   # asked for
         paths.update(report_paths(written))
         payload["analysis"] = analysis.to_dict()
         lines += [written.table_text, f"report: {written.markdown} and {written.html}"]

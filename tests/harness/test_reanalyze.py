@@ -7,11 +7,15 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
+from collections import Counter
 from pathlib import Path
 
 import pytest
 
+import trustroute.core.package as package_module
+import trustroute.harness.study.inputs as inputs_module
 from tests.cli import assert_one_line_error, run_cli
+from trustroute.core.package import sha256_of
 
 PATHS = ("study_dir", "report_markdown", "report_html", "plots")
 
@@ -54,13 +58,25 @@ def test_a_package_gives_the_study_s_figures_and_stays_as_published(study, tmp_p
     assert check.returncode == 0, check.stdout
 
 
-def test_a_package_s_report_goes_only_where_the_user_names(study, tmp_path, capsys):
+def test_a_package_s_report_goes_only_where_the_user_names(study, tmp_path, capsys, monkeypatch):
     package = exported(capsys, study, tmp_path / "package")
     published = files_of(package)
     code, out, err = run_cli(capsys, "analyze", str(package), "--report")
     assert_one_line_error(code, err, str(package), "--out", "read-only")
+    hashed: Counter[str] = Counter()
+
+    def counted(path: Path) -> str:
+        hashed[str(path)] += 1
+        return sha256_of(path)
+
+    # the command checks the package once: each file SHA256SUMS lists hashed once, for the
+    # analysis and the report's second analysis together, inputs/ not again against the manifest
+    monkeypatch.setattr(package_module, "sha256_of", counted)
+    monkeypatch.setattr(inputs_module, "sha256_of", counted)
     code, out, err = run_cli(capsys, "analyze", str(package), "--out", str(tmp_path / "report"))
     assert code == 0, err
+    listed = [line.partition("  ")[2] for line in (package / "SHA256SUMS").read_text().splitlines()]
+    assert hashed == Counter(str(package / name) for name in listed)
     assert (tmp_path / "report" / "report.md").is_file() and (tmp_path / "report" / "plots").is_dir()
     assert files_of(package) == published
 

@@ -16,6 +16,7 @@ from trustroute.analysis.carla_study.analysis import (
 )
 from trustroute.analysis.study.analysis import StudyAnalysis, study_analysis
 from trustroute.analysis.study.report import ReportPaths, write_report
+from trustroute.analysis.study_directory import load_study
 from trustroute.core.dataset import CARLA_LOGS_ENGINE
 from trustroute.core.errors import InputError
 from trustroute.core.package import is_package
@@ -55,15 +56,16 @@ def analyze_study(study_dir: Path, belief_source: str | None, report: bool,
     `report` the report written into `out` (default: the study directory; `report_wanted`)."""
 
     study_dir = Path(study_dir)
-    result = AnalyzedStudy(study_analysis(study_dir, belief_source=belief_source))
+    loaded = load_study(study_dir, package=True)   # read and checked once for all that follows
+    result = AnalyzedStudy(study_analysis(study_dir, belief_source=belief_source, loaded=loaded))
     if result.analysis.manifest.get("engine") == CARLA_LOGS_ENGINE:
         if is_package(study_dir):
             result.real_note = PACKAGE_REAL_STUDY
         else:
-            result.real = real_study_analysis(study_dir)
+            result.real = real_study_analysis(study_dir, loaded)
     if report:
         folder = study_dir if out is None else Path(out)
-        result.report = write_report(study_dir, analysis=result.analysis, out=folder)
+        result.report = write_report(study_dir, analysis=result.analysis, out=folder, loaded=loaded)
         if result.real is not None:
             written = write_real_study_report(result.real, folder)
             result.written = {"real_study_json": written, "real_study_text": written.with_suffix(".txt")}

@@ -588,10 +588,10 @@ def check_study_dir(study_dir: Path) -> Path:
 
 
 def read_manifest(study_dir: Path, package: bool = False) -> dict:
-    """manifest.json of a study, every key of MANIFEST_KEYS; `package`: or a package's, checked."""
-    packaged = package and packages.verify_package(study_dir)   # True once its checksums match
-    path = Path(study_dir) / packages.PACKAGE_MANIFEST_FILE if packaged else check_study_dir(study_dir)
-    fix = packages.TAMPERED_FIX if packaged else REBUILD_FIX
+    """manifest.json of a study, every key of MANIFEST_KEYS; `package`: the manifest of a package
+    whose checksums the caller found matching (`packages.verify_package`)."""
+    path = Path(study_dir) / packages.PACKAGE_MANIFEST_FILE if package else check_study_dir(study_dir)
+    fix = packages.TAMPERED_FIX if package else REBUILD_FIX
     manifest = read_json(path, "study manifest", fix=fix)
     missing = ([key for key in MANIFEST_KEYS if key not in manifest and key not in MANIFEST_OPTIONAL_KEYS]
                if isinstance(manifest, dict) else ["all"])
