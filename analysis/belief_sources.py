@@ -131,22 +131,34 @@ def refiltered(roads: pd.DataFrame, model: DriverModel, town: Town) -> pd.DataFr
     return roads.assign(belief_after=list(marginal))
 
 
+class SourceUnavailable(InputError):
+    """A belief source the study cannot give; `needs`: what it would need (the analysis' note on
+    the missing source says it, and so does the error for asking for it)."""
+
+    def __init__(self, study_dir: Path, source: str, needs: str) -> None:
+        self.needs = needs
+        super().__init__(str(study_dir), "", f"belief source {source!r} needs {needs}",
+                         "use filter, reported or reference")
+
+
 def true_roads(study_dir: Path, manifest: dict, roads: pd.DataFrame, episodes: pd.DataFrame,
                nominal: DriverModel, town: Town) -> pd.DataFrame:
     """`roads` on the "true" source: each episode's roads filtered with its driver's true model.
-    InputError when the drivers cannot be rebuilt from `manifest`'s config, or (in a package
-    `trustroute export` wrote) each participant's model needs their number, which the package's
-    codes hide (`PACKAGE_TRUE_SOURCE`)."""
+    `SourceUnavailable`, saying why, when the drivers cannot be rebuilt from `manifest`'s config
+    (`UNBUILT_TRUE_SOURCE`), or (in a package `trustroute export` wrote) each participant's model
+    needs their number, which the package's codes hide (`PACKAGE_TRUE_SOURCE`)."""
     from trustroute.harness.study.plan import participant_models
     from trustroute.harness.study.replay import study_config_from_manifest
 
-    config, _ = study_config_from_manifest(study_dir, manifest)
-    models = participant_models(config, nominal)
+    try:
+        config, _ = study_config_from_manifest(study_dir, manifest)
+        models = participant_models(config, nominal)
+    except InputError:
+        raise SourceUnavailable(study_dir, "true", UNBUILT_TRUE_SOURCE) from None
     if models is None:
         return refiltered(roads, nominal, town)
     if is_package(study_dir):
-        raise InputError(str(study_dir), "", f"belief source 'true' needs {PACKAGE_TRUE_SOURCE}",
-                         "use filter, reported or reference")
+        raise SourceUnavailable(study_dir, "true", PACKAGE_TRUE_SOURCE)
     # one filter run per distinct model (the types' models are shared by their participants)
     distinct = {id(m): i for i, m in enumerate(models)}
     model_of = {p: distinct[id(m)] for p, m in enumerate(models)}

@@ -48,9 +48,8 @@ import pandas as pd
 
 from trustroute.analysis.belief_sources import (
     BELIEF_SOURCES,
-    PACKAGE_TRUE_SOURCE,
     SIMULATED_ENGINES,
-    UNBUILT_TRUE_SOURCE,
+    SourceUnavailable,
     declared_belief_source,
     default_belief_source,
     refiltered,
@@ -74,7 +73,6 @@ from trustroute.analysis.study.questionnaires import questionnaire_tables
 from trustroute.analysis.study.sensitivity import sensitivity_table
 from trustroute.analysis.study_directory import LoadedStudy, load_study, study_inputs
 from trustroute.core.errors import InputError
-from trustroute.core.package import is_package
 from trustroute.core.wording import shown_value
 from trustroute.harness.study.context import reference_model
 
@@ -177,8 +175,8 @@ def source_satisfaction(study_dir: Path, manifest: dict, episodes: pd.DataFrame,
     if manifest.get("engine") in SIMULATED_ENGINES:   # a person (live, imported logs) has no model
         try:
             variants["true"] = (true_roads(study_dir, manifest, roads, episodes, driver, town), "filter")
-        except InputError:   # no "true" source: the note and asking for it say why
-            missing["true"] = PACKAGE_TRUE_SOURCE if is_package(study_dir) else UNBUILT_TRUE_SOURCE
+        except SourceUnavailable as error:   # no "true" source: the note and asking for it say why
+            missing["true"] = error.needs
     else:
         missing["true"] = (f"a simulated study (this one is {manifest.get('engine')}: its drivers are "
                            "people, no model)")

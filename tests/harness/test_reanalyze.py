@@ -109,6 +109,21 @@ def test_true_source_of_drivers_by_number_is_said_not_available(pilot_study, tmp
     assert_one_line_error(code, err, "--belief-source", "pseudonymous codes hide")
 
 
+def test_a_package_whose_drivers_cannot_be_rebuilt_says_so(study, tmp_path, capsys):
+    # the model study's drivers are all the nominal model: no number is needed to rebuild them, so
+    # a package whose config no trustroute can rebuild lacks "true" for that reason, not its codes
+    package = exported(capsys, study, tmp_path / "package")
+    manifest_path = package / "study_manifest.json"
+    manifest = json.loads(manifest_path.read_text())
+    manifest["config"]["setting_of_a_later_trustroute"] = 1
+    manifest_path.write_text(json.dumps(manifest))
+    sums = package / "SHA256SUMS"
+    sums.write_text("".join(f"{sha256_of(package / name)}  {name}\n" for name in
+                            (line.partition("  ")[2] for line in sums.read_text().splitlines())))
+    note = analysed(capsys, package, "--belief-source", "reported")["belief_source_note"]
+    assert "cannot rebuild" in note and "pseudonymous codes" not in note
+
+
 def test_a_package_without_a_manifest_is_refused(study, tmp_path, capsys):
     package = exported(capsys, study, tmp_path / "package")
     shutil.copytree(package, tmp_path / "old")
