@@ -207,9 +207,7 @@ def study_analysis(study_dir: Path, belief_source: str | None = None, resamples:
     satisfaction, missing = source_satisfaction(Path(study_dir), manifest, episodes, roads)
     # from here on the participants' numbers are their ranks by content (canonical.py): the
     # "true" source above needed their own numbers, which give each one's driver model
-    episodes, roads, rank_of_episode = canonical_tables(episodes, roads)
-    satisfaction = in_rank_order(satisfaction, rank_of_episode).assign(
-        participant=lambda frame: frame["episode_id"].map(rank_of_episode).astype("int64"))
+    episodes, roads, rank_of_episode, (satisfaction,) = canonical_tables(episodes, roads, satisfaction)
     source_note = ""
     if f"satisfied_{belief_source}" not in satisfaction and not chosen:
         # a simulated study whose drivers cannot be rebuilt: the reports are the neutral source left

@@ -69,15 +69,20 @@ def in_rank_order(frame: pd.DataFrame, rank_of_episode: dict[str, int]) -> pd.Da
     return frame.iloc[np.argsort(ranks, kind="stable")].reset_index(drop=True)
 
 
-def canonical_tables(episodes: pd.DataFrame, roads: pd.DataFrame
-                     ) -> tuple[pd.DataFrame, pd.DataFrame, dict[str, int]]:
-    """(episodes with `participant` their rank, roads, episode id -> rank), both tables' rows in rank
-    order: what the analysis computes from them is the same for any participant names and row
-    order (module docstring)."""
+def renumbered(frame: pd.DataFrame, rank_of_episode: dict[str, int]) -> pd.DataFrame:
+    """`frame` (one row per episode, with its participant) in rank order, `participant` its rank."""
+    ordered = in_rank_order(frame, rank_of_episode)
+    return ordered.assign(participant=ordered["episode_id"].map(rank_of_episode).astype("int64"))
+
+
+def canonical_tables(episodes: pd.DataFrame, roads: pd.DataFrame, *per_episode: pd.DataFrame
+                     ) -> tuple[pd.DataFrame, pd.DataFrame, dict[str, int], list[pd.DataFrame]]:
+    """(episodes `renumbered`, roads in rank order, episode id -> rank, each table of `per_episode`
+    (one row per episode, such as the satisfaction computed before the ranks) `renumbered`): what
+    the analysis computes from them is the same for any participant names and row order (module
+    docstring)."""
     ranks = participant_ranks(episodes, roads)
     rank_of_episode = {e: ranks[int(p)] for e, p in zip(episodes["episode_id"], episodes["participant"],
                                                          strict=True)}
-    renamed = episodes.assign(participant=[ranks[int(p)] for p in episodes["participant"]])
-    renamed["participant"] = renamed["participant"].astype("int64")
-    return (in_rank_order(renamed, rank_of_episode), in_rank_order(roads, rank_of_episode),
-            rank_of_episode)
+    return (renumbered(episodes, rank_of_episode), in_rank_order(roads, rank_of_episode), rank_of_episode,
+            [renumbered(frame, rank_of_episode) for frame in per_episode])

@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 from tests.cli import run_cli
-from trustroute.analysis.study.canonical import participant_ranks
+from trustroute.analysis.study.canonical import canonical_tables, participant_ranks
 from trustroute.core.dataset import EPISODES_FILE, MANIFEST_FILE, ROADS_FILE, STUDY_FILE
 
 
@@ -64,3 +64,13 @@ def test_ranks_follow_the_data_whatever_the_names_and_order(model_study):
     # the episodes' roads in their own order, wherever each episode's rows lie
     renamed_roads = renamed_roads.sort_values(["episode_id", "index"], kind="stable")
     assert participant_ranks(shuffled, renamed_roads) == {codes[p]: r for p, r in ranks.items()}
+
+
+def test_a_table_of_episodes_is_renumbered_as_the_episodes_are(model_study):
+    episodes = pd.read_parquet(model_study / EPISODES_FILE).sample(frac=1.0, random_state=3)
+    roads = pd.read_parquet(model_study / ROADS_FILE)
+    per_episode = episodes[["episode_id", "participant", "spec", "condition"]]
+    ranked, _, rank_of_episode, (table,) = canonical_tables(episodes, roads, per_episode)
+    assert sorted(set(ranked["participant"])) == list(range(episodes["participant"].nunique()))
+    assert table.equals(ranked[list(table.columns)])
+    assert list(table["participant"]) == [rank_of_episode[e] for e in table["episode_id"]]
