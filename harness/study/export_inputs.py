@@ -78,15 +78,18 @@ class PackagedInputs:
     rewritten) and those left out (path, or config place of a task file not shipped, -> why);
     `record`: each input's relative path -> {"sha256", "source"} (the manifest's, or for a study
     that stored none, `shipped_task`'s), `named`: the config values naming the copies of such a
-    study's task files, `shipped`: whether the inputs are the installed package's files, `mapped`:
-    the `path_map` of the full `record`, by which the copied files and the config are rewritten."""
+    study's task files, `shipped`: whether the inputs are the installed package's files."""
     roles: dict[str, str] = field(default_factory=dict)
     rewritten: dict[str, str] = field(default_factory=dict)
     left_out: dict[str, str] = field(default_factory=dict)
     record: Record = field(default_factory=dict)
     named: dict[str, object] = field(default_factory=dict)
     shipped: bool = False
-    mapped: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def mapped(self) -> dict[str, str]:
+        """The `path_map` of the full `record`, by which the copied files and the config are rewritten."""
+        return path_map(self.record)
 
 
 def input_roles(config: dict, recorded: list[str]) -> dict[str, str]:
@@ -237,7 +240,7 @@ def export_inputs(study_dir: Path, manifest: dict, out: Path, key: dict[int, int
         packaged.record = manifest["inputs"].get("files", {})
         sources = {relative: within(study_dir, relative) for relative in packaged.record}
     roles = input_roles({**config, **packaged.named}, list(packaged.record))
-    packaged.mapped, names = path_map(packaged.record), identifying_names(registry)
+    mapped, names = packaged.mapped, identifying_names(registry)
     for relative in sorted(packaged.record):
         path = sources[relative]
         if path is None:
@@ -252,7 +255,7 @@ def export_inputs(study_dir: Path, manifest: dict, out: Path, key: dict[int, int
             why = ("it is not UTF-8 text (nor a policy's decision table), so it cannot be read for "
                    "anything identifying")
         elif text is not None:
-            kept, said, why = cleaned(text, packaged.mapped, names, key)
+            kept, said, why = cleaned(text, mapped, names, key)
             if said is not None and relative.endswith(".gz"):
                 why = f"{said}, which a gzipped file is not rewritten for"
             elif said is not None:
@@ -270,7 +273,7 @@ def export_inputs(study_dir: Path, manifest: dict, out: Path, key: dict[int, int
 def config_text(config: dict, packaged: PackagedInputs) -> str:
     """The package's `study_config.json`: the config, naming the copies of the task files of a study
     that stored none, any absolute path in it (a study made before its inputs were stored) made
-    relative as in the copied files (by `packaged.mapped`, which `export_inputs` sets)."""
+    relative as in the copied files (by `packaged.mapped`)."""
     named = {**config, **packaged.named}
     return rewritten_paths(json.dumps(named, indent=1, default=str), packaged.mapped)[0]
 

@@ -71,3 +71,15 @@ def test_a_text_input_not_in_utf8_is_left_out_not_copied_unread(tmp_path):
     assert not (out / "inputs/0123456789abcdef/bg.rou.xml").exists()
     assert "UTF-8" in packaged.left_out["inputs/0123456789abcdef/bg.rou.xml"]
     assert (out / "inputs/policies/aware-1.npz").read_bytes() == files["inputs/policies/aware-1.npz"]
+
+
+def test_the_config_names_the_copies_its_inputs_record_says():
+    """The package's config is rewritten by the paths its record maps, whoever filled the record."""
+    import json
+
+    from trustroute.harness.study.export_inputs import PackagedInputs, config_text
+
+    copy = {"sha256": "0" * 64, "source": "/lab/towns/grid.json"}
+    packaged = PackagedInputs(record={"inputs/0000000000000000/grid.json": copy})
+    config = json.loads(config_text({"town": "/lab/towns/grid.json", "specs": ["/lab/gone.json"]}, packaged))
+    assert config == {"town": "inputs/0000000000000000/grid.json", "specs": [PATH_LEFT_OUT]}
