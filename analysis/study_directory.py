@@ -25,7 +25,7 @@ from trustroute.core.dataset import (
     read_roads,
 )
 from trustroute.core.errors import InputError
-from trustroute.core.package import table_path, verify_package
+from trustroute.core.package import tables_folder, verify_package
 from trustroute.harness.study.context import load_study_inputs
 from trustroute.harness.study.inputs import MANIFEST_FIX, relocated_config, spec_path, verify_inputs
 from trustroute.networks.town import Town
@@ -61,7 +61,8 @@ def check_logged_inputs(study_dir: Path, episodes: pd.DataFrame, roads: pd.DataF
     """The tables name only what the study's inputs have, or InputError naming the file, column and
     first row that does not: roads of the town, incidents of the driver model, specs of the study."""
     town, driver, specs = inputs
-    roads_file, episodes_file = (str(table_path(study_dir, name)) for name in (ROADS_FILE, EPISODES_FILE))
+    tables = tables_folder(study_dir)
+    roads_file, episodes_file = (str(tables / name) for name in (ROADS_FILE, EPISODES_FILE))
     check_allowed(episodes["spec"], specs, episodes_file, "spec",
                   f"one of the study's specs ({', '.join(specs)})")
     check_allowed(roads["directed_road"], town.states, roads_file, "directed_road",

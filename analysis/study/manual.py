@@ -12,8 +12,7 @@ from pathlib import Path
 import pandas as pd
 
 from trustroute.analysis.formatting import number_text
-from trustroute.core.dataset import INCIDENTS_FILE, MANUAL_MEASURES, read_incidents
-from trustroute.core.package import table_path
+from trustroute.core.dataset import MANUAL_MEASURES, read_incidents
 
 MANUAL_COLUMNS = (
     "incident", "condition", "takeovers", "reaction_s", "by_wheel", "lateral_sd_m", "min_ttc_s",
@@ -22,9 +21,8 @@ MANUAL_COLUMNS = (
 
 
 def study_incidents(study_dir: Path) -> pd.DataFrame:
-    """The takeover rows of the study's incidents table with the measures (none: empty)."""
-    if not table_path(study_dir, INCIDENTS_FILE).exists():
-        return pd.DataFrame()
+    """The takeover rows of the study's incidents table with the measures (none: empty; a study
+    without the table has none, `read_incidents`)."""
     incidents = read_incidents(study_dir, ["episode_id", "incident", "takeover", *MANUAL_MEASURES])
     return incidents[incidents["takeover"].astype(bool)]
 

@@ -192,3 +192,27 @@ def test_a_folder_of_logs_is_told_to_import_them_and_a_missing_folder_is_named_m
         code, out, err = run_cli(capsys, "fit", str(missing), "--out", str(tmp_path / "driver.json"))
         assert code == 2 and out == "" and err.count("\n") == 1, err
         assert f"{missing}: {problem} (fix: pass the folder" in err, err
+
+
+def test_a_package_s_table_is_found_once_per_read(model_study, tmp_path, monkeypatch):
+    """A package's tables lie in its tables/ folder: a table read looks once whether the folder it
+    is given is a package, however many of its files it reads (the table, the episodes its rows
+    belong to)."""
+    import shutil
+
+    from trustroute.core import package
+
+    tables = tmp_path / "package" / package.PACKAGE_TABLES_DIR
+    tables.mkdir(parents=True)
+    for name in (dataset.EPISODES_FILE, dataset.ROADS_FILE):
+        shutil.copyfile(model_study / name, tables / name)
+    (tmp_path / "package" / package.PACKAGE_CONFIG_FILE).write_text("{}")
+    asked = []
+    is_package = package.is_package
+    monkeypatch.setattr(package, "is_package", lambda folder: asked.append(folder) or is_package(folder))
+    roads = dataset.read_study_table(tmp_path / "package", "roads")
+    assert roads.equals(dataset.read_study_table(model_study, "roads"))
+    assert asked == [tmp_path / "package", model_study]
+    asked.clear()
+    assert dataset.read_incidents_table(tmp_path / "package").num_rows == 0
+    assert asked == [tmp_path / "package"]

@@ -461,18 +461,6 @@ def check_values(table: pa.Table, name: str, source: str,
                       f"a trust level of the study's driver model ({levels})")
 
 
-def _check_episode_rows(study_dir: Path, table: pa.Table, source: str) -> None:
-    """Every row's episode id is one of episodes.parquet (when the directory has one: `trustroute
-    run --out` writes one episode's tables without it)."""
-    if not packages.table_path(study_dir, EPISODES_FILE).exists():
-        return
-    # the ids only: the episodes' own values are checked where the episodes are read
-    known = read_table(packages.table_path(study_dir, EPISODES_FILE), TABLES["episodes"][1], ["episode_id"],
-                       ADDED_COLUMNS.get("episodes", ())).column(0).combine_chunks()
-    ids = table.column("episode_id").to_pandas()
-    check_allowed(ids, known.to_pylist(), source, "episode_id", f"an episode of {EPISODES_FILE}")
-
-
 def read_table(path: Path, schema: pa.Schema, columns: list[str] | None = None,
                added: tuple[str, ...] = ()) -> pa.Table:
     """A dataset table file checked against its schema; InputError naming the file when it is
@@ -500,11 +488,21 @@ def read_study_table(study_dir: Path, name: str, columns: list[str] | None = Non
     """The table `name` (a key of TABLES) of a study directory: the one reader of a study's tables,
     checking the file against its schema (`read_table`), its values (`check_values`; trust levels
     given: those of the study's driver model) and that its rows belong to the study's episodes."""
-    path = packages.table_path(study_dir, TABLES[name][0])
+    return _read_checked(packages.tables_folder(study_dir), name, columns, trust_levels)
+
+
+def _read_checked(tables: Path, name: str, columns: list[str] | None,
+                  trust_levels: tuple[int, ...] | None) -> pa.Table:
+    """`read_study_table` of the study whose tables lie in `tables`: episodes' rows name episodes of
+    its episodes.parquet, if any (`trustroute run --out` writes one episode's tables without it)."""
+    path, episodes = tables / TABLES[name][0], tables / EPISODES_FILE
     table = read_table(path, TABLES[name][1], None, ADDED_COLUMNS.get(name, ()))
     check_values(table, name, str(path), trust_levels)
-    if name in EPISODE_ROWS:
-        _check_episode_rows(study_dir, table, str(path))
+    if name in EPISODE_ROWS and episodes.exists():
+        # the ids only: the episodes' own values are checked where the episodes are read
+        known = read_table(episodes, TABLES["episodes"][1], ["episode_id"], ADDED_COLUMNS.get("episodes", ()))
+        check_allowed(table.column("episode_id").to_pandas(), known.column(0).combine_chunks().to_pylist(),
+                      str(path), "episode_id", f"an episode of {EPISODES_FILE}")
     return table.select(columns) if columns is not None else table
 
 
@@ -532,11 +530,13 @@ def read_kinematics(study_dir: Path, columns: list[str] | None = None) -> pd.Dat
 
 def read_incidents_table(study_dir: Path, columns: list[str] | None = None) -> pa.Table:
     """incidents.parquet (SUMO engine), checked (`read_study_table`); an empty table when the
-    study had no incident objects and no takeovers (the file is then not written)."""
-    dataset = (Path(study_dir) / MANIFEST_FILE).exists() or packages.is_package(study_dir)
-    if dataset and not packages.table_path(study_dir, INCIDENTS_FILE).exists():
+    study (a study directory, with its manifest, or a package, whose tables lie in a folder of
+    their own) had no incident objects and no takeovers (the file is then not written)."""
+    tables = packages.tables_folder(study_dir)
+    dataset = (Path(study_dir) / MANIFEST_FILE).exists() or tables != Path(study_dir)
+    if dataset and not (tables / INCIDENTS_FILE).exists():
         return INCIDENTS_SCHEMA.empty_table().select(columns or INCIDENTS_SCHEMA.names)
-    return read_study_table(study_dir, "incidents", columns)
+    return _read_checked(tables, "incidents", columns, None)
 
 
 def read_incidents(study_dir: Path, columns: list[str] | None = None) -> pd.DataFrame:

@@ -34,9 +34,14 @@ def is_package(folder: Path) -> bool:
     return (Path(folder) / PACKAGE_CONFIG_FILE).is_file() and (Path(folder) / PACKAGE_TABLES_DIR).is_dir()
 
 
+def tables_folder(folder: Path) -> Path:
+    """The folder of the tables of a study directory (itself), or of a package (its tables/)."""
+    return Path(folder, *[PACKAGE_TABLES_DIR] * is_package(folder))
+
+
 def table_path(folder: Path, file_name: str) -> Path:
     """The table file `file_name` of a study directory, or of a package (in its tables/ folder)."""
-    return Path(folder, *[PACKAGE_TABLES_DIR] * is_package(folder), file_name)
+    return tables_folder(folder) / file_name
 
 
 def package_fix(folder: Path) -> str | None:
