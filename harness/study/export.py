@@ -19,7 +19,7 @@ Nothing of the live registry (token digests, labels), the token log or the withd
 
 Neither is the order of enrolment or the lab's schedule: every table's rows are sorted by pseudonym
 (a participant's rows in the table's own order), and every wall-clock column becomes the seconds
-since the participant's first recorded wall-clock time (trustroute/core/codebook.py, EXPORTED_TIMES).
+since the participant's first recorded wall-clock time (trustroute/core/package.py, EXPORTED_TIMES).
 The README reports the participant flow (planned, with data, and for a live study withdrawn,
 declined and did not take part: counts adding up to the planned).
 """

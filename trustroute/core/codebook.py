@@ -14,6 +14,10 @@ from __future__ import annotations
 import pyarrow as pa
 
 from trustroute.core.dataset import TABLES
+from trustroute.core.package import CONFIG_WITHOUT_PEOPLE_SEEDS as CONFIG_WITHOUT_PEOPLE_SEEDS
+from trustroute.core.package import EXPORTED_TIMES as EXPORTED_TIMES
+from trustroute.core.package import WITHOUT_PEOPLE_SEEDS as WITHOUT_PEOPLE_SEEDS
+from trustroute.core.package import package_schema
 
 UTC = "UTC"   # the unit of a wall-clock column (an ISO 8601 date-time)
 TRUST = "integers 1-7 (1 = no trust, 7 = complete trust)"
@@ -155,11 +159,6 @@ COLUMNS: dict[str, dict[str, tuple[str, str, str]]] = {
 }
 
 
-# table -> wall-clock column -> the column an export writes in its place (harness/study/export.py)
-EXPORTED_TIMES: dict[str, dict[str, str]] = {
-    "attempts": {"started_utc": "started_s", "ended_utc": "ended_s"},
-    "questionnaires": {"answered_utc": "answered_s"},
-}
 SINCE_FIRST = ("in seconds since the participant's first recorded wall-clock time (the earliest start of "
                "their attempts or submission of their questionnaires, which is 0)")
 
@@ -175,24 +174,9 @@ EXPORTED_IDS: dict[str, tuple[str | None, str]] = {   # column -> (meaning, None
 }
 
 
-# Columns a package of a study with people leaves out, with the config keys that go with them: an
-# episode's seed is drawn from the study's seed and the participant's number (harness/study/plan.py),
-# so both together would give each pseudonym's number, the order of enrolment, back. A simulated
-# study keeps them (it has no one to hide, and they reproduce it).
-WITHOUT_PEOPLE_SEEDS: dict[str, tuple[str, ...]] = {"episodes": ("seed",)}
-CONFIG_WITHOUT_PEOPLE_SEEDS: tuple[str, ...] = ("seed",)
-
-
 def exported_schema(table: str, people: bool = False) -> pa.Schema:
-    """The schema of the table `table` in an exported package: its wall-clock columns as seconds,
-    and (`people`: a live study's package) without the columns of WITHOUT_PEOPLE_SEEDS."""
-    schema = TABLES[table][1]
-    for column in WITHOUT_PEOPLE_SEEDS.get(table, ()) if people else ():
-        schema = schema.remove(schema.get_field_index(column))
-    for column, seconds in EXPORTED_TIMES.get(table, {}).items():
-        index = schema.get_field_index(column)
-        schema = schema.set(index, pa.field(seconds, pa.float64(), nullable=schema.field(index).nullable))
-    return schema
+    """The schema of the table `table` (a key of TABLES) in an exported package (`package_schema`)."""
+    return package_schema(TABLES[table][1], table, people)
 
 
 def entry_of(table: str, column: str, exported: bool = False) -> tuple[str, str, str]:

@@ -461,46 +461,46 @@ def check_values(table: pa.Table, name: str, source: str,
                       f"a trust level of the study's driver model ({levels})")
 
 
-def read_table(path: Path, schema: pa.Schema, columns: list[str] | None = None,
+def read_table(path: Path, schema: pa.Schema | tuple[pa.Schema, ...], columns: list[str] | None = None,
                added: tuple[str, ...] = ()) -> pa.Table:
-    """A dataset table file checked against its schema; InputError naming the file when it is
-    missing, unreadable or of another schema. Columns of `added` missing at the end read as nulls."""
+    """A dataset table file checked against its schema (of several: the one of its columns, else the
+    first), its `added` columns missing at the end read as nulls; InputError naming the file when it
+    is missing, unreadable or of another schema."""
     path = Path(path)
     if not path.exists():
         raise InputError(str(path), "", "no such dataset file",
                          "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)")
     # Through the guarded reader: a FIFO or a device in place of a table must not block.
-    data = read_input_bytes(path, "dataset table", MAX_TABLE_BYTES,
-                            fix=REBUILD_FIX)
+    data = read_input_bytes(path, "dataset table", MAX_TABLE_BYTES, fix=REBUILD_FIX)
     try:
         table = pq.read_table(pa.BufferReader(data), page_checksum_verification=True)
+        schemas = schema if isinstance(schema, tuple) else (schema,)
+        schema = next((s for s in schemas if s.names == table.schema.names), schemas[0])
         table = with_added_columns(table.replace_schema_metadata(None), schema, added)
         check_table(table, schema, path.name)
     except (OSError, pa.ArrowException, SchemaError) as exc:
         raise InputError(str(path), "schema" if isinstance(exc, SchemaError) else "",
-                         f"cannot read the dataset table ({exc})",
-                         REBUILD_FIX) from None
+                         f"cannot read the dataset table ({exc})", REBUILD_FIX) from None
     return table.select(columns) if columns is not None else table
 
 
 def read_study_table(study_dir: Path, name: str, columns: list[str] | None = None,
-                     trust_levels: tuple[int, ...] | None = None) -> pa.Table:
-    """The table `name` (a key of TABLES) of a study directory: the one reader of a study's tables,
-    checking the file against its schema (`read_table`), its values (`check_values`; trust levels
-    given: those of the study's driver model) and that its rows belong to the study's episodes."""
-    return _read_checked(packages.tables_folder(study_dir), name, columns, trust_levels)
-
-
-def _read_checked(tables: Path, name: str, columns: list[str] | None,
-                  trust_levels: tuple[int, ...] | None) -> pa.Table:
-    """`read_study_table` of the study whose tables lie in `tables`: episodes' rows name episodes of
-    its episodes.parquet, if any (`trustroute run --out` writes one episode's tables without it)."""
+                     trust_levels: tuple[int, ...] | None = None, tables: Path | None = None) -> pa.Table:
+    """The table `name` (a key of TABLES) of a study directory or a package (`tables`: the folder of
+    its tables, `packages.tables_folder`, when the caller has it): the one reader of a study's tables,
+    checking the file against its schema (`read_table`; a package's as an export writes it), its
+    values (`check_values`; trust levels given: those of the study's driver model) and that its rows
+    belong to the study's episodes (of its episodes.parquet, if any: `trustroute run --out` writes none)."""
+    tables = packages.tables_folder(study_dir) if tables is None else tables
+    packaged = tables != Path(study_dir)   # a package's tables lie in a folder of their own
+    schema = {table: packages.package_schemas(TABLES[table][1], table) if packaged else TABLES[table][1]
+              for table in (name, "episodes")}
     path, episodes = tables / TABLES[name][0], tables / EPISODES_FILE
-    table = read_table(path, TABLES[name][1], None, ADDED_COLUMNS.get(name, ()))
+    table = read_table(path, schema[name], None, ADDED_COLUMNS.get(name, ()))
     check_values(table, name, str(path), trust_levels)
     if name in EPISODE_ROWS and episodes.exists():
         # the ids only: the episodes' own values are checked where the episodes are read
-        known = read_table(episodes, TABLES["episodes"][1], ["episode_id"], ADDED_COLUMNS.get("episodes", ()))
+        known = read_table(episodes, schema["episodes"], ["episode_id"], ADDED_COLUMNS.get("episodes", ()))
         check_allowed(table.column("episode_id").to_pandas(), known.column(0).combine_chunks().to_pylist(),
                       str(path), "episode_id", f"an episode of {EPISODES_FILE}")
     return table.select(columns) if columns is not None else table
@@ -529,14 +529,13 @@ def read_kinematics(study_dir: Path, columns: list[str] | None = None) -> pd.Dat
 
 
 def read_incidents_table(study_dir: Path, columns: list[str] | None = None) -> pa.Table:
-    """incidents.parquet (SUMO engine), checked (`read_study_table`); an empty table when the
-    study (a study directory, with its manifest, or a package, whose tables lie in a folder of
-    their own) had no incident objects and no takeovers (the file is then not written)."""
+    """incidents.parquet (SUMO engine), checked (`read_study_table`); an empty table when a study
+    directory or a package had no incident objects and no takeovers (the file is then not written)."""
     tables = packages.tables_folder(study_dir)
-    dataset = (Path(study_dir) / MANIFEST_FILE).exists() or tables != Path(study_dir)
-    if dataset and not (tables / INCIDENTS_FILE).exists():
+    packaged = tables != Path(study_dir)   # a package's tables lie in a folder of their own
+    if (packaged or (Path(study_dir) / MANIFEST_FILE).exists()) and not (tables / INCIDENTS_FILE).exists():
         return INCIDENTS_SCHEMA.empty_table().select(columns or INCIDENTS_SCHEMA.names)
-    return _read_checked(tables, "incidents", columns, None)
+    return read_study_table(study_dir, "incidents", columns, tables=tables)
 
 
 def read_incidents(study_dir: Path, columns: list[str] | None = None) -> pd.DataFrame:

@@ -1,6 +1,7 @@
 """The layout of a package `trustroute export` writes (docs/live_studies.md, "Export"), as far as
 the readers of a study need it: to know a package when one is passed for a study directory, to
-check it against its checksums, and to find its tables.
+check it against its checksums, and to find its tables and read them by the schemas the export
+writes them with (`package_schema`: no wall-clock time, and a live study's without its seeds).
 
 A package holds a study's tables in a folder of their own beside the config it was run with, and no
 study manifest: it is no study directory. `trustroute analyze` reads it all the same, from the
@@ -15,6 +16,8 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
+import pyarrow as pa
+
 from trustroute.core.errors import InputError
 from trustroute.core.validation import read_input_text
 
@@ -27,6 +30,17 @@ PACKAGE_FIX = ("this is a package `trustroute export` wrote, not a study directo
                f"the package's tables are Parquet files under {PACKAGE_TABLES_DIR}/, their columns in "
                "codebook.md")
 TAMPERED_FIX = "get the package again from where it was published (it must match its SHA256SUMS)"
+# table -> wall-clock column -> the column an export writes in its place (harness/study/export.py)
+EXPORTED_TIMES: dict[str, dict[str, str]] = {
+    "attempts": {"started_utc": "started_s", "ended_utc": "ended_s"},
+    "questionnaires": {"answered_utc": "answered_s"},
+}
+# Columns a package of a study with people leaves out, with the config keys that go with them: an
+# episode's seed is drawn from the study's seed and the participant's number (harness/study/plan.py),
+# so both together would give each pseudonym's number, the order of enrolment, back. A simulated
+# study keeps them (it has no one to hide, and they reproduce it).
+WITHOUT_PEOPLE_SEEDS: dict[str, tuple[str, ...]] = {"episodes": ("seed",)}
+CONFIG_WITHOUT_PEOPLE_SEEDS: tuple[str, ...] = ("seed",)
 
 
 def is_package(folder: Path) -> bool:
@@ -42,6 +56,24 @@ def tables_folder(folder: Path) -> Path:
 def table_path(folder: Path, file_name: str) -> Path:
     """The table file `file_name` of a study directory, or of a package (in its tables/ folder)."""
     return tables_folder(folder) / file_name
+
+
+def package_schema(schema: pa.Schema, table: str, people: bool = False) -> pa.Schema:
+    """The schema `schema` of the study table `table` (a key of dataset.TABLES) as a package holds
+    it: its wall-clock columns as seconds, and (`people`: a live study's package) without the
+    columns of WITHOUT_PEOPLE_SEEDS."""
+    for column in WITHOUT_PEOPLE_SEEDS.get(table, ()) if people else ():
+        schema = schema.remove(schema.get_field_index(column))
+    for column, seconds in EXPORTED_TIMES.get(table, {}).items():
+        index = schema.get_field_index(column)
+        schema = schema.set(index, pa.field(seconds, pa.float64(), nullable=schema.field(index).nullable))
+    return schema
+
+
+def package_schemas(schema: pa.Schema, table: str) -> tuple[pa.Schema, ...]:
+    """The schemas a package's table `table` of study schema `schema` may have: as a simulated
+    study's package holds it, and as a live study's does (`package_schema`)."""
+    return package_schema(schema, table), package_schema(schema, table, people=True)
 
 
 def package_fix(folder: Path) -> str | None:

@@ -123,8 +123,18 @@ def test_an_exported_live_study_reads_back_against_its_codebook(tmp_path, capsys
     assert "0 did not take part" in readme
     code, _, err = run_cli(capsys, "export", str(study_dir), "--out", str(package))
     assert code == 2 and "not empty" in err
+    # re-analysed from its package, the study gives its own figures, field by field (the order of
+    # its runs read from the package's attempts, its participants under their codes)
+    own, packaged = (analyzed(capsys, folder) for folder in (study_dir, package))
+    assert own["cells"] and own["order"]   # figures, not empty tables
+    assert {k: v for k, v in packaged.items() if k != "study_dir"} == {
+        k: v for k, v in own.items() if k != "study_dir"}
 
 
+def analyzed(capsys, folder) -> dict:
+    code, out, err = run_cli(capsys, "analyze", str(folder), "--json")
+    assert code == 0, err
+    return json.loads(out)
 
 
 def test_the_package_says_what_each_questionnaire_asked_and_names_no_file_of_the_lab(tmp_path, capsys):
