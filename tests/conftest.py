@@ -99,13 +99,7 @@ def net_path(town, temporary_cache) -> Path:
     return build_net(town).path
 
 
-@pytest.fixture(scope="session")
-def model_study(tmp_path_factory) -> Path:
-    """A small finished model-engine study (aware vs free on φ1 and φ2), shared by the analysis and
-    dataset tests."""
-    root = tmp_path_factory.mktemp("study")
-    cache = tmp_path_factory.mktemp("policies")
-    run_study(root / "study.toml", f"""[study]
+MODEL_STUDY = """[study]
 name = "analysis-fixture"
 participants = 12
 seed = 3
@@ -113,43 +107,47 @@ engine = "model"
 specs = ["phi1", "phi2"]
 conditions = ["aware", "free"]
 policy_cache = "{cache}"
-""", root / "out")
-    return root / "out"
+"""
 
 
-@pytest.fixture(scope="session")
-def model_report(model_study) -> dict:
-    """The JSON of `trustroute analyze MODEL_STUDY --json --report`, run once per session (it must
-    succeed). Its report (report.md, report.html, plots/) is written into the model study, where the
-    report, paired-table and plot tests read it: each of them would otherwise write the same report
-    again, its plots most of an analysis' time. No other test writes a report there."""
+def _build_model_study(folder: Path) -> None:
+    """The model study in `folder/out` (its config `folder/study.toml`, its policies
+    `folder/policies`) and its report, whose `analyze --json --report` is kept in
+    `folder/report.json`: written in the build, so no worker writes into the study while another
+    reads it."""
     import json
 
     from click.testing import CliRunner
 
     from trustroute.harness.cli import cli
 
-    result = CliRunner().invoke(cli, ["analyze", str(model_study), "--json", "--report"])
+    run_study(folder / "study.toml", MODEL_STUDY.format(cache=folder / "policies"), folder / "out")
+    result = CliRunner().invoke(cli, ["analyze", str(folder / "out"), "--json", "--report"])
     assert result.exit_code == 0, (result.stderr, result.exception)
-    return json.loads(result.stdout)
+    (folder / "report.json").write_text(json.dumps(json.loads(result.stdout)))
 
 
 @pytest.fixture(scope="session")
-def pilot_study(model_study, tmp_path_factory):
-    """make(seed, participants=8, extra=""): a finished model-engine pilot study (aware vs free on
-    φ1 and φ2, the model study's policy cache) whose drivers report their exact trust on every road
-    (so `fit` counts: a refit takes hundredths of a second), `extra` appended to its config; each
-    made once per session."""
-    from trustroute.harness.study.config import load_study_config
+def model_study(temporary_cache) -> Path:
+    """A small finished model-engine study (aware vs free on φ1 and φ2), shared by the analysis and
+    dataset tests: built once per run (`shared_fixture`), its report (report.md, report.html,
+    plots/) already written. No test writes into it: a test that changes a study (an export writes
+    its key into it) works on a copy."""
+    return shared_fixture(temporary_cache, "model-study", _build_model_study) / "out"
 
-    cache = load_study_config(model_study.parent / "study.toml").policy_cache
-    made: dict[tuple, Path] = {}
 
-    def make(seed: int, participants: int = 8, extra: str = "") -> Path:
-        key = (seed, participants, extra)
-        if key not in made:
-            root = tmp_path_factory.mktemp(f"pilot{seed}")
-            run_study(root / "pilot.toml", f"""[study]
+@pytest.fixture(scope="session")
+def model_report(model_study) -> dict:
+    """The JSON of `trustroute analyze MODEL_STUDY --json --report`, run once per run with the
+    model study (it must succeed). The report, paired-table and plot tests read its report in the
+    model study: each of them would otherwise write the same report again, its plots most of an
+    analysis' time."""
+    import json
+
+    return json.loads((model_study.parent / "report.json").read_text())
+
+
+PILOT_STUDY = """[study]
 name = "pilot-{seed}"
 participants = {participants}
 seed = {seed}
@@ -160,9 +158,26 @@ policy_cache = "{cache}"
 {extra}
 [population]
 report_accuracy = 1.0
-""", root / "out")
-            made[key] = root / "out"
-        return made[key]
+"""
+
+
+@pytest.fixture(scope="session")
+def pilot_study(model_study, temporary_cache):
+    """make(seed, participants=8, extra=""): a finished model-engine pilot study (aware vs free on
+    φ1 and φ2, the model study's policy cache) whose drivers report their exact trust on every road
+    (so `fit` counts: a refit takes hundredths of a second), `extra` appended to its config; each
+    made once per run (`shared_fixture`, named by its config). No test writes into one."""
+    import hashlib
+
+    from trustroute.harness.study.config import load_study_config
+
+    cache = load_study_config(model_study.parent / "study.toml").policy_cache
+
+    def make(seed: int, participants: int = 8, extra: str = "") -> Path:
+        text = PILOT_STUDY.format(seed=seed, participants=participants, cache=cache, extra=extra)
+        name = f"pilot-{seed}-{hashlib.sha256(text.encode()).hexdigest()[:12]}"
+        return shared_fixture(temporary_cache, name,
+                              lambda folder: run_study(folder / "pilot.toml", text, folder / "out")) / "out"
 
     return make
 

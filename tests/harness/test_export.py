@@ -25,6 +25,7 @@ from tests.export_checks import (
     package_key,
 )
 from tests.lock_holder import another_process_holds
+from trustroute.harness.study.config import load_study_config
 from trustroute.harness.study.export import pseudonyms, read_export_keys
 
 
@@ -214,7 +215,7 @@ def test_a_package_holds_the_inputs_that_define_the_task(model_study, tmp_path, 
     assert [p for p in policies if p.startswith("aware-")] == policies and len(policies) == 4
     written = (package / config["source_path"]).read_text()
     assert 'policy_cache = "inputs/policies"' in written
-    cache = str(model_study.parent.parent / "policies")   # the fixture's policy cache
+    cache = str(load_study_config(model_study.parent / "study.toml").policy_cache)   # its policies
     assert_nothing_identifying(package, [str(tmp_path), str(model_study), cache, str(Path.cwd()),
                                          str(Path(trustroute.__file__).parent)])
 

@@ -92,7 +92,9 @@ def test_a_tampered_package_is_refused_naming_the_file(study, tmp_path, capsys):
 
 @pytest.mark.slow
 def test_true_source_of_drivers_by_number_is_said_not_available(pilot_study, tmp_path, capsys):
-    study = pilot_study(5)   # a [population]: each participant's driver sampled by their number
+    # a [population]: each participant's driver sampled by their number; a copy, as an export
+    # writes the study's key into it
+    study = Path(shutil.copytree(pilot_study(5), tmp_path / "study"))
     package = exported(capsys, study, tmp_path / "package")
     on_study, on_package = (analysed(capsys, folder, "--belief-source", "reported")
                             for folder in (study, package))
