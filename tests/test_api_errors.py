@@ -3,6 +3,8 @@ follow the CLI's rules."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 import trustroute
@@ -27,6 +29,11 @@ POPULATION = "driver_population_three_types"
      "sumo: a SUMO configuration needs the SUMO engine, not 'model'"),
     (lambda: trustroute.run_episode("phi1", engine="model", observer=print),
      "observer: an observer of SUMO's steps needs the SUMO engine, not 'model'"),
+    (lambda: trustroute.run_episode("phi1", settings=EpisodeSettings(engine="model", net=Path("x.net.xml"))),
+     "net: a SUMO net needs the SUMO engine, not 'model'"),
+    (lambda: EpisodeSettings(engine="model", rrd=Path("x.rrd")),
+     "rrd: a Rerun recording needs the SUMO engine"),
+    (lambda: EpisodeSettings(engine="carla"), "engine: unknown engine 'carla'"),
 ])
 def test_api_errors_name_keyword_arguments(call, named):
     with pytest.raises(InputError, match=named) as caught:

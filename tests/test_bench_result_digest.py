@@ -56,15 +56,6 @@ def test_an_entry_its_work_limit_or_convergence_ended_is_digested(stopped_by):
     result_digest.refuse_clock_cut(ENTRY, args, {"stopped_by": stopped_by})     # no exit
 
 
-def test_a_digest_run_leaves_the_callers_cache_root_as_it_was(monkeypatch, capsys, tmp_path):
-    # the digest's commands cache in a root of their own; the process that ran it (a test worker)
-    # keeps its own cache root afterwards
-    before = os.environ.get("XDG_CACHE_HOME")
-    monkeypatch.setattr(result_digest, "digest", lambda work, only: {})
-    result_digest.main([str(tmp_path / "out.json"), "--only", ENTRY])
-    assert os.environ.get("XDG_CACHE_HOME") == before
-
-
 # read as every JSON input is (trustroute/core/validation.py, read_json): nesting too deep for
 # json.loads to parse without a RecursionError is one line too
 @pytest.mark.parametrize("text", [None, "{not json", "[1]", "[" * 100_000, '{"a": 1, "a": 2}'])

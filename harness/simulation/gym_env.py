@@ -330,7 +330,9 @@ class TrustRoutingEnv(gymnasium.Env):
         point = self._advance()
         # every episode reaches a decision point: a spec decided on its start road is refused when
         # the environment is made (_check_start), and no junction cap is below 1
-        assert isinstance(point, DecisionPoint)
+        if not isinstance(point, DecisionPoint):
+            raise RuntimeError(f"episode {episode_id} ended before its first junction, which the "
+                               "environment's start check rules out: please report it")
         return self._decision(point.context), self._info()
 
     def step(self, action: int) -> tuple[dict, float, bool, bool, dict]:

@@ -105,7 +105,7 @@ def exact_horizon(problem: ComparedProblem, source: str, junctions: int) -> int:
     --horizon, else the route's own (beyond it the policy has ended the episode, so a longer one
     gives the same value); an InputError for a --horizon that would cut the route short."""
     if problem.horizon is None:
-        return junctions
+        return max(junctions, 1)   # a spec decided on its start road: at least one junction, as --horizon
     if problem.horizon < junctions:
         raise InputError(source, "--horizon", f"the baseline route drives {junctions} junctions, more "
                          f"than --horizon {problem.horizon}: Storm would value the route cut short",

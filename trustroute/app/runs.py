@@ -47,11 +47,12 @@ class EpisodeSettings:
 
     def __post_init__(self) -> None:
         keep_checked(self, {"seed": SEED})
-        engine = engine_named(self.engine, "--engine", simulated=True)
-        check_sumo_only(engine, self.rrd, "a Rerun recording", "--rrd")
-        check_sumo_only(engine, self.net, "a SUMO net", "--net")
-        check_sumo_only(engine, self.sumo, "a SUMO configuration", "EpisodeSettings", "sumo")
-        check_sumo_only(engine, self.observer, "an observer of SUMO's steps", "EpisodeSettings", "observer")
+        # named by its fields, as the API's keywords are (the CLI's `run` always drives SUMO)
+        engine = engine_named(self.engine, "EpisodeSettings", "engine", simulated=True)
+        for given, what, name in ((self.rrd, "a Rerun recording", "rrd"), (self.net, "a SUMO net", "net"),
+                                  (self.sumo, "a SUMO configuration", "sumo"),
+                                  (self.observer, "an observer of SUMO's steps", "observer")):
+            check_sumo_only(engine, given, what, "EpisodeSettings", name)
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,7 @@ def test_a_study_analysed_by_plan_gives_the_reports_p_values(model_study):
     another order or coding moves its p-value in the ninth digit on some processors."""
     analysis = study_analysis(model_study)
     manifest, episodes, roads = load_study(model_study)
-    episodes, _, _ = canonical_tables(episodes, roads)
+    episodes, _, _, _ = canonical_tables(episodes, roads)
     results = episodes_tests(episodes, ("mcnemar", "conditional_or", "wilcoxon", "mixed_model"), 0.05,
                              conditions=manifest["config"]["conditions"])
     by_key = {(r.test, r.spec): r for r in results}
