@@ -64,6 +64,7 @@ from trustroute.core.fields import (
     field_table,
     keys,
 )
+from trustroute.core.package import outside_packages
 from trustroute.core.packaged import SPECS, PackagedKind
 from trustroute.core.validation import FILE_NAME, FILE_NAME_RULE, parse_toml, read_text
 from trustroute.core.wording import shown_value
@@ -113,7 +114,7 @@ class StudyConfig:
     report_every: int = 1
     belief_rule: BeliefRule = "bayes"
     output: str | None = None
-    policy_cache: str | None = None   # None: the resolver's default cache
+    policy_cache: str | None = None   # None: the resolver's default cache (also for one in a package)
     background_vehicles: int = 0      # SUMO engine: seeded background traffic (docs/scenes.md)
     routes: tuple[str, ...] = ()      # SUMO engine: route files of background traffic (absolute)
     record: tuple[str, ...] = ()      # episode ids recorded to Rerun during the run
@@ -147,8 +148,7 @@ class StudyConfig:
 
     @property
     def report_accuracy(self) -> float:
-        value = (self.population or {}).get("report_accuracy", DEFAULT_REPORT_ACCURACY)
-        return float(value)
+        return float((self.population or {}).get("report_accuracy", DEFAULT_REPORT_ACCURACY))
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -562,7 +562,7 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         belief_rule=study["belief_rule"],
         output=_directory(study["output"] if study["output"] is not None else str(DEFAULT_STUDIES_DIR / name),
                           base),
-        policy_cache=_directory(study["policy_cache"], base),
+        policy_cache=outside_packages(_directory(study["policy_cache"], base)),
         background_vehicles=study["background_vehicles"],
         routes=_route_files(study["routes"], town, base, source),
         record=tuple(study["record"]),

@@ -46,6 +46,7 @@ from trustroute.core import defaults
 from trustroute.core.dataset import LOCK_FILE
 from trustroute.core.errors import InputError
 from trustroute.core.interrupts import sigterm_raises
+from trustroute.core.package import check_outside_package
 from trustroute.core.progress import bar_disable
 from trustroute.core.ranges import ATTEMPTS
 from trustroute.core.wording import counted, shown_value
@@ -345,11 +346,13 @@ def open_study_dir(study_dir: Path, config: StudyConfig) -> Iterator[None]:
 
 
 def check_study_output(study_dir: Path) -> None:
-    """The study directory (--out) is a directory or can be made: checked before any input is (a
-    missing "aware" policy is synthesized then, which may take minutes) and before anything is said."""
+    """The study directory (--out) is a directory or can be made, outside any package: checked
+    before any input is (a missing "aware" policy is synthesized then, which may take minutes) and
+    before anything is said."""
     from trustroute.core.output_files import check_output_dir
 
     check_output_dir(study_dir, "--out", "study directory")
+    check_outside_package(study_dir, "--out", "study directory")
 
 
 def validate_study(config: StudyConfig | StudyContext, scheduler: str | None = None,

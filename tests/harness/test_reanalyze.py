@@ -1,6 +1,7 @@
 """`trustroute analyze` on a package `trustroute export` wrote: the study's own `--json` figures,
 bit for bit, under the package's codes; nothing written into the package; a tampered package
-refused; a source the package cannot give said, with why."""
+refused; a source the package cannot give said, with why. A simulated study re-run from its
+package's copy of its config file: the study's figures again, nothing written into the package."""
 
 from __future__ import annotations
 
@@ -134,3 +135,23 @@ def test_a_package_without_a_manifest_is_refused(study, tmp_path, capsys):
                             if not line.endswith("study_manifest.json")))
     code, _, err = run_cli(capsys, "analyze", str(tmp_path / "old"), "--json")
     assert_one_line_error(code, err, "study_manifest.json", "export the study again")
+
+
+def test_a_study_re_run_from_its_package_writes_nothing_into_it(study, tmp_path, capsys, monkeypatch):
+    package = exported(capsys, study, tmp_path / "package")
+    published = files_of(package)
+    folders = sorted(p for p in package.rglob("*") if p.is_dir())
+    [config] = package.glob("inputs/*/study.toml")   # the study's config file, as written
+    shown = str(config.relative_to(package))
+    monkeypatch.chdir(package)   # its `inputs/...` paths are the package's (docs/live_studies.md)
+    for out in (("--out", str(package / "rerun")), ()):   # in the package: the config's default too
+        code, _, err = run_cli(capsys, "study", shown, *out, "--workers", "1", "--no-report")
+        assert_one_line_error(code, err, f"in the package {package}", "outside the package")
+    code, _, err = run_cli(capsys, "study", shown, "--out", str(tmp_path / "rerun"), "--workers", "1",
+                           "--no-report")
+    assert code == 0, err
+    assert files_of(package) == published   # its policy cache is the user's, not inputs/policies
+    assert sorted(p for p in package.rglob("*") if p.is_dir()) == folders
+    rerun, own = (analysed(capsys, folder) for folder in (tmp_path / "rerun", study))
+    assert {k: v for k, v in rerun.items() if k not in PATHS} == {
+        k: v for k, v in own.items() if k not in PATHS}   # the study's own figures, "true" included

@@ -8,7 +8,8 @@ study manifest: it is no study directory. `trustroute analyze` reads it all the 
 package's manifest (`PACKAGE_MANIFEST_FILE`: the study manifest's keys, docs/dataset.md, with what
 would identify a participant or the lab left out), once every file `SHA256SUMS` lists has its
 checksum; the commands that need more than the tables (`replay`, `fit`, `plan --pilot`, `export`)
-say it is a package.
+say it is a package. A run writes nothing into a package (`package_holding`): a study directory
+there is refused, and a policy cache there is the user's.
 """
 
 from __future__ import annotations
@@ -46,6 +47,31 @@ CONFIG_WITHOUT_PEOPLE_SEEDS: tuple[str, ...] = ("seed",)
 def is_package(folder: Path) -> bool:
     """Whether `folder` is a package (it has a package's config and tables folder)."""
     return (Path(folder) / PACKAGE_CONFIG_FILE).is_file() and (Path(folder) / PACKAGE_TABLES_DIR).is_dir()
+
+
+def package_holding(path: Path) -> Path | None:
+    """The package `path` lies in: itself or the nearest folder above it that `is_package`, else
+    None. A package is published read-only, so a run writes nothing under it (a copy of one is a
+    package too)."""
+    path = Path(path).resolve()
+    return next((folder for folder in (path, *path.parents) if is_package(folder)), None)
+
+
+def check_outside_package(path: Path, option: str, what: str) -> None:
+    """InputError naming the package when the `what` folder `path` (given by `option`) lies in one."""
+    package = package_holding(path)
+    if package is not None:
+        raise InputError(str(path), option, f"the {what} lies in the package {package}, which is "
+                         "published read-only: a run writes nothing into it",
+                         f"pass {option} a folder outside the package")
+
+
+def outside_packages(folder: str | None) -> str | None:
+    """A study config's policy cache `folder` (None: the user's cache), the user's cache when it lies
+    in a package: a config file a package holds names a cache beside itself (a study re-run from
+    it), which the run would fill there. The cache is no part of a study's identity (its config's
+    `content_hash`), so the run's data are the same."""
+    return None if folder is None or package_holding(Path(folder)) is not None else folder
 
 
 def tables_folder(folder: Path) -> Path:
