@@ -64,6 +64,9 @@ def test_a_package_s_report_goes_only_where_the_user_names(study, tmp_path, caps
     published = files_of(package)
     code, out, err = run_cli(capsys, "analyze", str(package), "--report")
     assert_one_line_error(code, err, str(package), "--out", "read-only")
+    code, out, err = run_cli(capsys, "analyze", str(package), "--out", str(package / "report"))
+    assert_one_line_error(code, err, str(package / "report"), "--out", "read-only")
+    assert files_of(package) == published
     hashed: Counter[str] = Counter()
 
     def counted(path: Path) -> str:

@@ -19,7 +19,7 @@ from trustroute.analysis.study.report import ReportPaths, write_report
 from trustroute.analysis.study_directory import load_study
 from trustroute.core.dataset import CARLA_LOGS_ENGINE
 from trustroute.core.errors import InputError
-from trustroute.core.package import is_package
+from trustroute.core.package import check_outside_package, is_package
 
 # why a package of an imported study gives no real-study analysis (the one figure it cannot give)
 PACKAGE_REAL_STUDY = ("not available from a package: the real-study analysis reads the CARLA logs' ticks "
@@ -47,6 +47,8 @@ def report_wanted(study_dir: Path, report: bool | None, default: bool, out: Path
     if report and packaged and out is None:
         raise InputError(str(study_dir), "--out", "a package is published read-only: analyze writes no "
                          "report into it", "pass --out DIR, the folder for the report (or --no-report)")
+    if report and out is not None:
+        check_outside_package(Path(out), "--out", "report folder")
     return report
 
 
