@@ -10,7 +10,13 @@ import pytest
 
 from trustroute.core import output_files
 from trustroute.core.errors import InputError
-from trustroute.core.output_files import OS_ERROR_FIXES, check_output_file, os_error_fix, write_error
+from trustroute.core.output_files import (
+    OS_ERROR_FIXES,
+    check_output_dir,
+    check_output_file,
+    os_error_fix,
+    write_error,
+)
 
 
 @pytest.mark.parametrize(("code", "words"), [
@@ -111,3 +117,16 @@ def test_atomic_create_without_hard_links_takes_the_name_then_fills_it(tmp_path,
     assert not output_files.atomic_create_bytes(target, b"second", "study marker")
     assert target.read_bytes() == b"first"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mark.json"]
+
+
+def test_an_output_inside_a_package_is_refused(tmp_path):
+    """A package (its config and tables folder) is published read-only: a file or folder to write
+    anywhere under it is refused naming the package, before anything is written."""
+    package = tmp_path / "package"
+    (package / "tables").mkdir(parents=True)
+    (package / "study_config.json").write_text("{}")
+    for check, path in ((check_output_file, package / "model.json"), (check_output_dir, package / "a" / "b")):
+        with pytest.raises(InputError, match=f"lies in the package {package}, which is published read-only"):
+            check(path, "--out", "output")
+    assert sorted(p.name for p in package.rglob("*")) == ["study_config.json", "tables"]
+    check_output_file(tmp_path / "beside.json", "--out", "output")   # beside it: allowed
