@@ -217,6 +217,7 @@ HEAVY_OR_OPTIONAL = {
     "uvicorn": "the live station's server only",
     "websockets": "the scripted live participant only",
     "multiprocessing": "a process start method chosen where processes start",
+    "pyarrow": "tables only (a package's rules, read by every output check, need none)",
 }
 # Imports still inside functions of modules being reworked elsewhere (module -> imported modules);
 # an entry that moves to the top is to leave this list.

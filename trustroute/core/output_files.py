@@ -28,6 +28,7 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 
 from trustroute.core.errors import InputError
+from trustroute.core.package import check_outside_package
 
 TEMP_PREFIX = ".tmp-"
 
@@ -202,7 +203,7 @@ def check_output_file(path: str | Path, option: str, what: str, reads: Inputs | 
     if "\x00" in str(path):
         raise InputError(option, "", f"the {what} path contains a NUL byte", "pass an ordinary path")
     check_apart(path, option, what, reads or {}, studies or {})
-    _not_in_a_package(path, option, what)
+    check_outside_package(path, option, what)   # published read-only: its SHA256SUMS would break
     if path.is_dir():
         raise InputError(str(path), option, f"the {what} path is a directory",
                          f"pass a file path to {option}, e.g. {path / f'out{suffix}'}")
@@ -238,14 +239,6 @@ def check_apart(path: Path, option: str, what: str, reads: Inputs, studies: Inpu
                              f"pass a path outside {given} to {option}")
 
 
-def _not_in_a_package(path: Path, option: str, what: str) -> None:
-    """No output inside a package `trustroute export` wrote: it is published read-only, and its
-    SHA256SUMS would no longer hold (trustroute/core/package.py, `check_outside_package`)."""
-    from trustroute.core import package  # imported where an output is checked: it imports pyarrow
-
-    package.check_outside_package(path, option, what)
-
-
 def _same_file(output: Path, given: Path) -> bool:
     try:
         return os.path.samefile(output, given)
@@ -261,7 +254,7 @@ def check_output_dir(path: str | Path, option: str, what: str) -> Path:
     if path.exists() and not path.is_dir():
         raise InputError(str(path), option, f"the {what} exists and is not a directory",
                          f"pass a directory to {option}")
-    _not_in_a_package(path, option, what)
+    check_outside_package(path, option, what)   # published read-only: its SHA256SUMS would break
     folder = _writable_folder(path)
     if not folder.is_dir():
         raise InputError(str(path), option, f"{folder} is not a directory", f"pass a directory to {option}")
