@@ -42,12 +42,12 @@ def load_study(study_dir: Path, package: bool = False) -> LoadedStudy:
     where the directory lies, harness/study/inputs.py), checked against their hashes, and the
     tables are checked against those inputs (module docstring). `package`: or of a package
     `trustroute export` wrote, checked against its checksums (`verify_package`), which cover its
-    manifest and its inputs/ as well: their hashes are not checked a second time."""
+    manifest and its inputs/ as well: what its manifest records of its inputs is checked against
+    those checksums, no file hashed a second time."""
     study_dir = Path(study_dir)
-    packaged = package and verify_package(study_dir)
-    manifest = read_manifest(study_dir, packaged)
-    if not packaged:
-        verify_inputs(manifest, study_dir)
+    checked = verify_package(study_dir) if package else None
+    manifest = read_manifest(study_dir, checked is not None)
+    verify_inputs(manifest, study_dir, checked)
     manifest = {**manifest, "config": relocated_config(manifest.get("config") or {}, study_dir)}
     town, driver, specs = study_inputs(manifest, study_dir)
     episodes = read_episodes(study_dir, trust_levels=driver.trust_levels)

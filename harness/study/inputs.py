@@ -26,13 +26,13 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from trustroute.core.dataset import MANIFEST_FILE
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_bytes
-from trustroute.core.package import sha256_of
+from trustroute.core.package import PACKAGE_MANIFEST_FILE, SUMS_FILE, TAMPERED_FIX, sha256_of
 from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.harness.study.config import NAMED_CONDITIONS
 from trustroute.harness.study.context import (
@@ -225,19 +225,53 @@ def unchecked_config(manifest: dict, study_dir: Path) -> str | None:
             "from the log")
 
 
-def verify_inputs(manifest: dict, study_dir: Path) -> None:
-    """Every stored input is present and has the hash the manifest records, or InputError."""
+@dataclass(frozen=True)
+class _Wording:
+    """What `verify_inputs` says of a study directory or of a package: the manifest's file, and each
+    problem with its fix."""
+    manifest: str
+    missing: str
+    missing_fix: str
+    changed: str
+    changed_fix: str
+    config: str
+    config_fix: str
+
+
+_STUDY_WORDING = _Wording(
+    MANIFEST_FILE, "a stored input of the study is missing",
+    "copy the whole study directory, inputs/ included",
+    "a stored input of the study changed since it was run (its SHA-256 differs from the manifest's)",
+    "restore the study directory from its original copy", "since the study was run", MANIFEST_FIX)
+_PACKAGE_WORDING = _Wording(
+    PACKAGE_MANIFEST_FILE, f"an input the package's manifest records is missing from {SUMS_FILE}",
+    TAMPERED_FIX, "an input the package's manifest records differs from its copy (its SHA-256 in "
+    f"{SUMS_FILE} differs from the manifest's)", TAMPERED_FIX, "since the package was exported", TAMPERED_FIX)
+
+
+def verify_inputs(manifest: dict, study_dir: Path, checked: dict[str, str] | None = None) -> None:
+    """Every stored input the manifest records is present with the hash it records, and so is the
+    manifest's config (`inputs.config_sha256`), or InputError. `checked`: the study is a package, and
+    these are the SHA-256 of the files its SHA256SUMS lists, each verified (trustroute/core/package.py,
+    `verify_package`): the recorded hashes are compared with them, so no file is hashed twice."""
     study_dir = Path(study_dir)
+    said = _STUDY_WORDING if checked is None else _PACKAGE_WORDING
     for relative, entry in sorted((manifest.get("inputs") or {}).get("files", {}).items()):
-        path = study_dir / relative
-        if not path.is_file():
-            raise InputError(str(study_dir), relative, "a stored input of the study is missing",
-                             "copy the whole study directory, inputs/ included")
-        if sha256_of(path) != entry.get("sha256"):
-            raise InputError(str(study_dir), relative, "a stored input of the study changed since it was "
-                             "run (its SHA-256 differs from the manifest's)",
-                             "restore the study directory from its original copy")
+        digest = _stored_sha256(study_dir, relative, checked)
+        if digest is None:
+            raise InputError(str(study_dir), relative, said.missing, said.missing_fix)
+        if digest != entry.get("sha256"):
+            raise InputError(str(study_dir), relative, said.changed, said.changed_fix)
     recorded = (manifest.get("inputs") or {}).get("config_sha256")
     if recorded is not None and config_sha256(manifest.get("config") or {}) != recorded:
-        raise InputError(str(study_dir / MANIFEST_FILE), "config", "the manifest's config changed since the "
-                         "study was run (its SHA-256 differs from inputs.config_sha256)", MANIFEST_FIX)
+        raise InputError(str(study_dir / said.manifest), "config", f"the manifest's config changed "
+                         f"{said.config} (its SHA-256 differs from inputs.config_sha256)", said.config_fix)
+
+
+def _stored_sha256(study_dir: Path, relative: str, checked: dict[str, str] | None) -> str | None:
+    """The SHA-256 of the stored input `relative` (None: it is missing), as `verify_inputs` finds it:
+    of the file in the study directory, or of a package, as its verified checksums give it."""
+    if checked is not None:
+        return checked.get(relative)
+    path = study_dir / relative
+    return sha256_of(path) if path.is_file() else None

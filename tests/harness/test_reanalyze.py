@@ -17,6 +17,7 @@ import trustroute.core.package as package_module
 import trustroute.harness.study.inputs as inputs_module
 from tests.cli import assert_one_line_error, run_cli
 from trustroute.core.package import sha256_of
+from trustroute.harness.study.inputs import config_sha256
 
 PATHS = ("study_dir", "report_markdown", "report_html", "plots")
 
@@ -38,6 +39,15 @@ def study(model_study, tmp_path) -> Path:
     """A copy of the shared model study: an export writes the study's key into it (export-key.json),
     which the shared study must not carry into other tests."""
     return Path(shutil.copytree(model_study, tmp_path / "study"))
+
+
+def resummed(package: Path, *left_out: str) -> None:
+    """SHA256SUMS written again for the package's files as they are now, without `left_out`: the
+    checksums alone no longer tell what changed."""
+    sums = package / "SHA256SUMS"
+    names = [line.partition("  ")[2] for line in sums.read_text().splitlines()]
+    sums.write_text("".join(f"{sha256_of(package / name)}  {name}\n"
+                            for name in names if name not in left_out))
 
 
 def files_of(folder: Path) -> dict[str, bytes]:
@@ -115,17 +125,41 @@ def test_true_source_of_drivers_by_number_is_said_not_available(pilot_study, tmp
     assert_one_line_error(code, err, "--belief-source", "pseudonymous codes hide")
 
 
+def test_a_package_is_checked_against_what_its_manifest_records(study, tmp_path, capsys):
+    """With its checksums rewritten to match, a package that lost a stored input (a spec, which
+    the packaged one of its name would stand in for, or the driver model), or whose manifest's
+    config was edited, is refused in one line naming the input or the config."""
+    package = exported(capsys, study, tmp_path / "package")
+    recorded = json.loads((package / "study_manifest.json").read_text())["inputs"]["files"]
+    for ending in ("/phi2.toml", "/driver_model.json"):
+        copy = Path(shutil.copytree(package, tmp_path / ending.strip("/")))
+        name = next(name for name in recorded if name.endswith(ending))
+        (copy / name).unlink()
+        resummed(copy, name)
+        code, out, err = run_cli(capsys, "analyze", str(copy), "--json")
+        assert_one_line_error(code, err, name, "the package's manifest records is missing from SHA256SUMS")
+        assert out == ""
+    manifest_path = package / "study_manifest.json"
+    manifest = json.loads(manifest_path.read_text())
+    manifest["config"]["participants"] += 1
+    manifest_path.write_text(json.dumps(manifest))
+    resummed(package)
+    code, out, err = run_cli(capsys, "analyze", str(package), "--json")
+    assert_one_line_error(code, err, str(manifest_path), "config", "inputs.config_sha256")
+    assert out == ""
+
+
 def test_a_package_whose_drivers_cannot_be_rebuilt_says_so(study, tmp_path, capsys):
     # the model study's drivers are all the nominal model: no number is needed to rebuild them, so
     # a package whose config no trustroute can rebuild lacks "true" for that reason, not its codes
     package = exported(capsys, study, tmp_path / "package")
+    # as a later trustroute would export it: its manifest records the hash of the config it holds
     manifest_path = package / "study_manifest.json"
     manifest = json.loads(manifest_path.read_text())
     manifest["config"]["setting_of_a_later_trustroute"] = 1
+    manifest["inputs"]["config_sha256"] = config_sha256(manifest["config"])
     manifest_path.write_text(json.dumps(manifest))
-    sums = package / "SHA256SUMS"
-    sums.write_text("".join(f"{sha256_of(package / name)}  {name}\n" for name in
-                            (line.partition("  ")[2] for line in sums.read_text().splitlines())))
+    resummed(package)
     note = analysed(capsys, package, "--belief-source", "reported")["belief_source_note"]
     assert "cannot rebuild" in note and "pseudonymous codes" not in note
 

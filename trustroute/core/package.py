@@ -120,13 +120,15 @@ def sha256_of(path: Path) -> str:
     return digest.hexdigest()
 
 
-def verify_package(folder: Path) -> bool:
-    """Whether `folder` is a package (`is_package`) whose every file `SHA256SUMS` lists has that
-    SHA-256, the package's manifest one of them; False for no package; InputError naming the first
-    file that is not so."""
+def verify_package(folder: Path) -> dict[str, str] | None:
+    """The SHA-256 (hex) of each file `SHA256SUMS` lists of the package `folder` (`is_package`),
+    by its path relative to the package, every one found to be the file's, the package's manifest
+    one of them; None for no package; InputError naming the first file that is not so. The caller
+    checks what the manifest records against these (harness/study/inputs.py, `verify_inputs`)
+    rather than hashing a file again."""
     folder = Path(folder)
     if not is_package(folder):
-        return False
+        return None
     sums = folder / SUMS_FILE
     listed: dict[str, str] = {}
     lines = read_input_text(sums, "package checksums", fix=TAMPERED_FIX).splitlines()
@@ -151,4 +153,4 @@ def verify_package(folder: Path) -> bool:
         if actual != digest:
             raise InputError(str(path), "", f"its SHA-256 differs from the one in {SUMS_FILE}: the "
                              "package changed since it was exported", TAMPERED_FIX)
-    return True
+    return listed
