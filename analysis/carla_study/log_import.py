@@ -51,7 +51,7 @@ from trustroute.core.progress import bar_disable
 from trustroute.core.validation import csv_place
 from trustroute.core.wording import counted
 from trustroute.harness.study.manifest import git_revision, package_versions
-from trustroute.harness.study.resume import check_own_folder
+from trustroute.harness.study.resume import check_own_folder, study_files
 from trustroute.networks.road import Road
 from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
@@ -352,7 +352,7 @@ def check_import_target(out: Path, logs: list[LogFile]) -> None:
     """Before anything is written: `out` is new or empty (a folder of other files is refused, as a
     study's --out is: `check_own_folder`), or is an earlier import of the same logs (the same files
     found), which is imported again in place."""
-    found = dataset.study_files(out)
+    found = study_files(out)
     if not found:
         check_own_folder(out)
         return

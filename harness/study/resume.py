@@ -16,11 +16,12 @@ from pathlib import Path
 from trustroute.core.dataset import (
     DAMAGED_DIR,
     LOCK_FILE,
+    MANIFEST_FILE,
     PART_FOLDERS,
     PLOTS_DIR,
     STUDY_FILE,
+    TABLES,
     read_manifest,
-    study_files,
 )
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import TEMP_PREFIX, atomic_create_bytes, atomic_write_text, temp_path
@@ -36,6 +37,23 @@ from trustroute.harness.study.parts import (
     read_part,
 )
 from trustroute.harness.study.plan import EpisodeTask
+
+
+def study_files(study_dir: Path) -> list[str]:
+    """The names of a study's own files that `study_dir` holds: its manifest, a table, a part, a
+    failure or a damaged part. A run or an import writes over them only when they are the same
+    study's; a new or empty directory, or one holding only the mark and the lock, holds none."""
+    study_dir = Path(study_dir)
+    names = [MANIFEST_FILE, *(file_name for file_name, _ in TABLES.values())]
+    found = [name for name in names if (study_dir / name).exists()]
+    for folder in (*PART_FOLDERS, DAMAGED_DIR):
+        try:
+            if (study_dir / folder).is_dir() and any((study_dir / folder).iterdir()):
+                found.append(f"{folder}/")
+        except OSError:   # an unreadable folder may hold anything
+            found.append(f"{folder}/")
+    return found
+
 
 
 def recorded_config_hash(study_dir: Path, config_hash: str) -> str | None:

@@ -253,22 +253,6 @@ TABLES: dict[str, tuple[str, pa.Schema]] = {
 }
 
 
-def study_files(study_dir: Path) -> list[str]:
-    """The names of a study's own files that `study_dir` holds: its manifest, a table, a part, a
-    failure or a damaged part. A run or an import writes over them only when they are the same
-    study's; a new or empty directory, or one holding only the mark and the lock, holds none."""
-    study_dir = Path(study_dir)
-    names = [MANIFEST_FILE, *(file_name for file_name, _ in TABLES.values())]
-    found = [name for name in names if (study_dir / name).exists()]
-    for folder in (*PART_FOLDERS, DAMAGED_DIR):
-        try:
-            if (study_dir / folder).is_dir() and any((study_dir / folder).iterdir()):
-                found.append(f"{folder}/")
-        except OSError:   # an unreadable folder may hold anything
-            found.append(f"{folder}/")
-    return found
-
-
 class SchemaError(ValueError):
     """A table whose columns, types or nulls differ from its schema."""
 
