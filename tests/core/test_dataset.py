@@ -216,3 +216,33 @@ def test_a_package_s_table_is_found_once_per_read(model_study, tmp_path, monkeyp
     asked.clear()
     assert dataset.read_incidents_table(tmp_path / "package").num_rows == 0
     assert asked == [tmp_path / "package"]
+
+
+def test_a_live_package_s_table_of_an_earlier_form_reads_by_the_package_s_schema(model_study, tmp_path):
+    """A live study's package holds its episodes without seeds (package.package_schema); one that
+    ends before the columns added since (ADDED_COLUMNS) reads by that schema with those columns
+    null; a table of no schema a package holds, or of impossible values, is refused with a package's
+    fix, not a study directory's."""
+    from trustroute.core import package
+
+    folder = tmp_path / "package"
+    (folder / package.PACKAGE_TABLES_DIR).mkdir(parents=True)
+    (folder / package.PACKAGE_CONFIG_FILE).write_text("{}")
+    path = package.table_path(folder, dataset.EPISODES_FILE)
+    added = list(dataset.ADDED_COLUMNS["episodes"])
+    earlier = pq.read_table(model_study / dataset.EPISODES_FILE).drop_columns(["seed", *added])
+    pq.write_table(earlier, path)
+    episodes = dataset.read_study_table(folder, "episodes")
+    assert episodes.schema.equals(package.package_schema(dataset.EPISODES_SCHEMA, "episodes", people=True))
+    assert episodes.drop_columns(added).equals(earlier.replace_schema_metadata(None))
+    assert all(episodes.column(name).null_count == episodes.num_rows for name in added)
+    pq.write_table(earlier.drop_columns(["spec"]), path)
+    with pytest.raises(InputError) as error:
+        dataset.read_study_table(folder, "episodes")
+    assert (error.value.source, error.value.place) == (str(path), "schema")
+    assert error.value.fix == package.PACKAGE_TABLE_FIX
+    pq.write_table(pa.concat_tables([earlier, earlier.slice(0, 1)]), path)
+    with pytest.raises(InputError) as error:
+        dataset.read_study_table(folder, "episodes")
+    assert error.value.place == f"episode_id, row {earlier.num_rows}"
+    assert error.value.fix == package.PACKAGE_TABLE_FIX

@@ -399,15 +399,15 @@ def check_allowed(values: pd.Series, allowed: Iterable, source: str, column: str
         raise InputError(source, f"{column}, row {row}", f"{shown_value(value)} is not {what}", fix)
 
 
-def _check_unique(table: pa.Table, keys: tuple[str, ...], source: str) -> None:
+def _check_unique(table: pa.Table, keys: tuple[str, ...], source: str, fix: str) -> None:
     repeated = table.select(list(keys)).to_pandas().duplicated().to_numpy(dtype=bool)
     if repeated.any():
         row = int(np.flatnonzero(repeated)[0])
         key = ", ".join(f"{k} {table.column(k)[row].as_py()!r}" for k in keys)
-        raise InputError(source, f"{keys[-1]}, row {row}", f"a second row of {key}", REBUILD_FIX)
+        raise InputError(source, f"{keys[-1]}, row {row}", f"a second row of {key}", fix)
 
 
-def _check_beliefs(table: pa.Table, column: str, source: str, width: int | None) -> None:
+def _check_beliefs(table: pa.Table, column: str, source: str, width: int | None, fix: str) -> None:
     """Every belief of `column` a probability vector of `width` entries (default: the first row's)."""
     beliefs = table.column(column).combine_chunks()
     lengths = pc.list_value_length(beliefs).to_numpy(zero_copy_only=False)
@@ -418,75 +418,77 @@ def _check_beliefs(table: pa.Table, column: str, source: str, width: int | None)
     if wrong.size:
         row = int(wrong[0])
         raise InputError(source, f"{column}, row {row}", f"a belief of {lengths[row]} entries, not {width} "
-                         "(one per trust level of the study's driver model)", REBUILD_FIX)
+                         "(one per trust level of the study's driver model)", fix)
     values = pc.list_flatten(beliefs).to_numpy(zero_copy_only=False).astype(float)
     found = first_non_belief(values.reshape(lengths.size, width))
     if found is not None:
-        raise InputError(source, f"{column}, row {found[0]}", f"not a probability vector: {found[1]}",
-                         REBUILD_FIX)
+        raise InputError(source, f"{column}, row {found[0]}", f"not a probability vector: {found[1]}", fix)
 
 
 def check_values(table: pa.Table, name: str, source: str,
-                 trust_levels: tuple[int, ...] | None = None) -> None:
+                 trust_levels: tuple[int, ...] | None = None, fix: str = REBUILD_FIX) -> None:
     """The values of the study table `name` (a key of TABLES) read from `source`, or InputError naming
-    the column and first bad row: no two rows of one episode (one road of an episode), beliefs that
-    are probability vectors of one length, and given the study driver model's `trust_levels`, every
-    trust one of them (or null) and beliefs of one entry per level."""
+    the column and first bad row (and `fix`): no two rows of one episode (one road of an episode),
+    beliefs that are probability vectors of one length, and given the study driver model's
+    `trust_levels`, every trust one of them (or null) and beliefs of one entry per level."""
     if name in UNIQUE_ROWS:
-        _check_unique(table, UNIQUE_ROWS[name], source)
+        _check_unique(table, UNIQUE_ROWS[name], source, fix)
     width = None if trust_levels is None else len(trust_levels)
     for column in BELIEF_COLUMNS.get(name, ()):
-        _check_beliefs(table, column, source, width)
+        _check_beliefs(table, column, source, width, fix)
     if trust_levels is None:
         return
     levels = ", ".join(str(level) for level in trust_levels)
     for column in TRUST_COLUMNS.get(name, ()):
         check_allowed(table.column(column).to_pandas().astype("Int64"), trust_levels, source, column,
-                      f"a trust level of the study's driver model ({levels})")
+                      f"a trust level of the study's driver model ({levels})", fix)
 
 
 def read_table(path: Path, schema: pa.Schema | tuple[pa.Schema, ...], columns: list[str] | None = None,
-               added: tuple[str, ...] = ()) -> pa.Table:
-    """A dataset table file checked against its schema (of several: the one of its columns, else the
-    first), its `added` columns missing at the end read as nulls; InputError naming the file when it
-    is missing, unreadable or of another schema."""
+               added: tuple[str, ...] = (), fix: str = REBUILD_FIX) -> pa.Table:
+    """A dataset table file checked against its schema (of several: the one of its columns, its
+    `added` columns missing at the end read as nulls, else the first); InputError naming the file
+    when it is missing, or (with `fix`) unreadable or of another schema."""
     path = Path(path)
     if not path.exists():
         raise InputError(str(path), "", "no such dataset file",
                          "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)")
     # Through the guarded reader: a FIFO or a device in place of a table must not block.
-    data = read_input_bytes(path, "dataset table", MAX_TABLE_BYTES, fix=REBUILD_FIX)
+    data = read_input_bytes(path, "dataset table", MAX_TABLE_BYTES, fix=fix)
     try:
         table = pq.read_table(pa.BufferReader(data), page_checksum_verification=True)
+        table = table.replace_schema_metadata(None)
         schemas = schema if isinstance(schema, tuple) else (schema,)
-        schema = next((s for s in schemas if s.names == table.schema.names), schemas[0])
-        table = with_added_columns(table.replace_schema_metadata(None), schema, added)
+        filled = ((with_added_columns(table, s, added), s) for s in schemas)
+        table, schema = next((pair for pair in filled if pair[0].schema.names == pair[1].names),
+                             (table, schemas[0]))
         check_table(table, schema, path.name)
     except (OSError, pa.ArrowException, SchemaError) as exc:
         raise InputError(str(path), "schema" if isinstance(exc, SchemaError) else "",
-                         f"cannot read the dataset table ({exc})", REBUILD_FIX) from None
+                         f"cannot read the dataset table ({exc})", fix) from None
     return table.select(columns) if columns is not None else table
 
 
 def read_study_table(study_dir: Path, name: str, columns: list[str] | None = None,
-                     trust_levels: tuple[int, ...] | None = None, tables: Path | None = None) -> pa.Table:
-    """The table `name` (a key of TABLES) of a study directory or a package (`tables`: the folder of
-    its tables, `packages.tables_folder`, when the caller has it): the one reader of a study's tables,
+                     trust_levels: tuple[int, ...] | None = None, packaged: bool | None = None) -> pa.Table:
+    """The table `name` (a key of TABLES) of a study directory or a package (`packaged`: whether it
+    is one, `packages.is_package`, when the caller has asked): the one reader of a study's tables,
     checking the file against its schema (`read_table`; a package's as an export writes it), its
     values (`check_values`; trust levels given: those of the study's driver model) and that its rows
     belong to the study's episodes (of its episodes.parquet, if any: `trustroute run --out` writes none)."""
-    tables = packages.tables_folder(study_dir) if tables is None else tables
-    packaged = tables != Path(study_dir)   # a package's tables lie in a folder of their own
+    packaged = packages.is_package(study_dir) if packaged is None else packaged
+    tables = packages.tables_folder(study_dir, packaged)
+    fix = packages.PACKAGE_TABLE_FIX if packaged else REBUILD_FIX
     schema = {table: packages.package_schemas(TABLES[table][1], table) if packaged else TABLES[table][1]
               for table in (name, "episodes")}
     path, episodes = tables / TABLES[name][0], tables / EPISODES_FILE
-    table = read_table(path, schema[name], None, ADDED_COLUMNS.get(name, ()))
-    check_values(table, name, str(path), trust_levels)
+    table = read_table(path, schema[name], None, ADDED_COLUMNS.get(name, ()), fix)
+    check_values(table, name, str(path), trust_levels, fix)
     if name in EPISODE_ROWS and episodes.exists():
         # the ids only: the episodes' own values are checked where the episodes are read
-        known = read_table(episodes, schema["episodes"], ["episode_id"], ADDED_COLUMNS.get("episodes", ()))
+        known = read_table(episodes, schema["episodes"], ["episode_id"], ADDED_COLUMNS["episodes"], fix)
         check_allowed(table.column("episode_id").to_pandas(), known.column(0).combine_chunks().to_pylist(),
-                      str(path), "episode_id", f"an episode of {EPISODES_FILE}")
+                      str(path), "episode_id", f"an episode of {EPISODES_FILE}", fix)
     return table.select(columns) if columns is not None else table
 
 
@@ -515,11 +517,11 @@ def read_kinematics(study_dir: Path, columns: list[str] | None = None) -> pd.Dat
 def read_incidents_table(study_dir: Path, columns: list[str] | None = None) -> pa.Table:
     """incidents.parquet (SUMO engine), checked (`read_study_table`); an empty table when a study
     directory or a package had no incident objects and no takeovers (the file is then not written)."""
-    tables = packages.tables_folder(study_dir)
-    packaged = tables != Path(study_dir)   # a package's tables lie in a folder of their own
-    if (packaged or (Path(study_dir) / MANIFEST_FILE).exists()) and not (tables / INCIDENTS_FILE).exists():
+    packaged = packages.is_package(study_dir)
+    written = (packages.tables_folder(study_dir, packaged) / INCIDENTS_FILE).exists()
+    if (packaged or (Path(study_dir) / MANIFEST_FILE).exists()) and not written:
         return INCIDENTS_SCHEMA.empty_table().select(columns or INCIDENTS_SCHEMA.names)
-    return read_study_table(study_dir, "incidents", columns, tables=tables)
+    return read_study_table(study_dir, "incidents", columns, packaged=packaged)
 
 
 def read_incidents(study_dir: Path, columns: list[str] | None = None) -> pd.DataFrame:

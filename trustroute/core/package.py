@@ -33,6 +33,9 @@ PACKAGE_FIX = ("this is a package `trustroute export` wrote, not a study directo
                f"the package's tables are Parquet files under {PACKAGE_TABLES_DIR}/, their columns in "
                "codebook.md")
 TAMPERED_FIX = "get the package again from where it was published (it must match its SHA256SUMS)"
+# the fix of a package's table that is not as this trustroute exports it: it exported no such table
+PACKAGE_TABLE_FIX = ("analyse the package with the trustroute that exported it (its versions.json names "
+                     "the version), or get the package again from where it was published")
 # table -> wall-clock column -> the column an export writes in its place (harness/study/export.py)
 EXPORTED_TIMES: dict[str, dict[str, str]] = {
     "attempts": {"started_utc": "started_s", "ended_utc": "ended_s"},
@@ -76,9 +79,11 @@ def outside_packages(folder: str | None) -> str | None:
     return None if folder is None or package_holding(Path(folder)) is not None else folder
 
 
-def tables_folder(folder: Path) -> Path:
-    """The folder of the tables of a study directory (itself), or of a package (its tables/)."""
-    return Path(folder, *[PACKAGE_TABLES_DIR] * is_package(folder))
+def tables_folder(folder: Path, packaged: bool | None = None) -> Path:
+    """The folder of the tables of a study directory (itself), or of a package (its tables/);
+    `packaged`: whether `folder` is a package (`is_package`), when the caller has asked."""
+    packaged = is_package(folder) if packaged is None else packaged
+    return Path(folder, *[PACKAGE_TABLES_DIR] * packaged)
 
 
 def table_path(folder: Path, file_name: str) -> Path:
