@@ -67,10 +67,20 @@ def test_ranks_follow_the_data_whatever_the_names_and_order(model_study):
 
 
 def test_a_table_of_episodes_is_renumbered_as_the_episodes_are(model_study):
+    """A table of one row per episode, in an order of its own (not the episodes'), comes back in rank
+    order with each row's participant the rank of its own episode, each participant's rows in the
+    table's order."""
+    columns = ["episode_id", "participant", "spec", "condition"]
     episodes = pd.read_parquet(model_study / EPISODES_FILE).sample(frac=1.0, random_state=3)
     roads = pd.read_parquet(model_study / ROADS_FILE)
-    per_episode = episodes[["episode_id", "participant", "spec", "condition"]]
+    per_episode = episodes[columns].sample(frac=1.0, random_state=4)
+    assert list(per_episode["episode_id"]) != list(episodes["episode_id"])
     ranked, _, rank_of_episode, (table,) = canonical_tables(episodes, roads, per_episode)
     assert sorted(set(ranked["participant"])) == list(range(episodes["participant"].nunique()))
-    assert table.equals(ranked[list(table.columns)])
-    assert list(table["participant"]) == [rank_of_episode[e] for e in table["episode_id"]]
+    own = dict(zip(episodes["episode_id"], episodes["participant"], strict=True))
+    assert any(rank != own[e] for e, rank in rank_of_episode.items())   # renumbering moves someone
+    by_rank = sorted(per_episode["episode_id"], key=rank_of_episode.__getitem__)   # stable
+    assert list(table["episode_id"]) == by_rank
+    assert list(table["participant"]) == [rank_of_episode[e] for e in by_rank]
+    expected = ranked[columns].set_index("episode_id").loc[by_rank].reset_index()
+    assert table.reset_index(drop=True).equals(expected)
