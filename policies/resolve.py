@@ -26,6 +26,7 @@ from trustroute.core.cache import POLICIES, entry_lock_path
 from trustroute.core.cache import cache_dir as cache_dir_of
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import file_lock
+from trustroute.core.package import check_outside_package
 from trustroute.core.wording import outward
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
@@ -64,6 +65,10 @@ class PolicySettings:
     horizon: int | None = AWARE_HORIZON
     belief_rule: BeliefRule = defaults.BELIEF_RULE
     progress: bool = False
+
+    def __post_init__(self) -> None:
+        if self.cache_dir is not None:   # every door's: a package is published read-only
+            check_outside_package(Path(self.cache_dir), "--cache-dir", "policy cache")
 
 
 DEFAULT_POLICY = PolicySettings()

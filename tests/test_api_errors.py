@@ -169,3 +169,17 @@ def test_an_argument_of_the_wrong_type_is_named(call, named):
     with pytest.raises(InputError, match=named) as caught:
         call()
     assert "--" not in str(caught.value)
+
+
+def test_the_api_writes_nothing_into_a_package(tmp_path):
+    """A package (its config and tables folder) is published read-only at the API's doors as at the
+    CLI's: a policy file or a policy cache in one is refused naming the keyword, and nothing is
+    written there."""
+    package = tmp_path / "package"
+    (package / "tables").mkdir(parents=True)
+    (package / "study_config.json").write_text("{}")
+    with pytest.raises(InputError, match="out: the policy file lies in the package"):
+        trustroute.synthesize("phi1", horizon=4, out=package / "policy.json")
+    with pytest.raises(InputError, match="cache_dir: the policy cache lies in the package"):
+        trustroute.evaluate("phi1", "aware", cache_dir=package / "cache")
+    assert sorted(p.name for p in package.rglob("*")) == ["study_config.json", "tables"]

@@ -66,7 +66,7 @@ from trustroute.core.fields import (
 )
 from trustroute.core.package import outside_packages
 from trustroute.core.packaged import SPECS, PackagedKind
-from trustroute.core.validation import FILE_NAME, FILE_NAME_RULE, parse_toml, read_text
+from trustroute.core.validation import FILE_NAME, FILE_NAME_RULE, PATH_TEXT, parse_toml, read_text
 from trustroute.core.wording import shown_value
 from trustroute.networks.cities import ROUTES, check_route_set_town, read_route_file, route_set_town
 from trustroute.networks.town import TOWNS, load_town
@@ -405,9 +405,9 @@ STUDY_FIELDS = field_table(
           fix="write e.g. report_every = 1"),
     Field(key="belief_rule", kind=BELIEF_RULE_NAMES, default="bayes",
           fix="use 'bayes' or 'paper'"),
-    Field(key="output", kind=Text(), fix='write output = "out/paper"',
+    Field(key="output", kind=Text(pattern=PATH_TEXT), fix='write output = "out/paper"',
           problem=lambda seen: f"expected a directory path, got {shown_value(seen.value)}"),
-    Field(key="policy_cache", kind=Text(), problem="expected a directory path",
+    Field(key="policy_cache", kind=Text(pattern=PATH_TEXT), problem="expected a directory path",
           fix='write policy_cache = "cache/policies" or omit it'),
     Field(key="background_vehicles", kind=ranges.BACKGROUND_VEHICLES.kind, default=0,
           problem=ranges.BACKGROUND_VEHICLES.problem,

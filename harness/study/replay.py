@@ -30,7 +30,7 @@ import pyarrow.compute as pc
 from trustroute.app.engines import ENGINES
 from trustroute.core.dataset import BELIEF_COLUMNS, EPISODE_ROWS, EPISODES_SCHEMA, TABLES, frame_from_table
 from trustroute.core.errors import InputError
-from trustroute.core.output_files import move_into_place, temp_path
+from trustroute.core.output_files import check_output_file, move_into_place, temp_path
 from trustroute.core.wording import shown_value
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import study_context
@@ -291,6 +291,8 @@ def replay_episode(
     from trustroute.harness.study.runner import run_planned_episode
 
     study_dir = Path(study_dir)
+    if rrd_path is not None:
+        check_output_file(rrd_path, "--rrd", "Rerun recording", suffix=".rrd")
     config, manifest = study_config_from_manifest(study_dir)
     warning = check_same_code(manifest, config, study_dir) if check_code else None
     warnings = () if warning is None else (warning,)

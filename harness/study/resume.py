@@ -55,7 +55,6 @@ def study_files(study_dir: Path) -> list[str]:
     return found
 
 
-
 def recorded_config_hash(study_dir: Path, config_hash: str) -> str | None:
     """The config hash the study directory is marked with (None: new, empty, or a study without a
     readable mark whose manifest names this config); InputError when it holds a study with another

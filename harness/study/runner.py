@@ -46,7 +46,6 @@ from trustroute.core import defaults
 from trustroute.core.dataset import LOCK_FILE
 from trustroute.core.errors import InputError
 from trustroute.core.interrupts import sigterm_raises
-from trustroute.core.package import check_outside_package
 from trustroute.core.progress import bar_disable
 from trustroute.core.ranges import ATTEMPTS
 from trustroute.core.wording import counted, shown_value
@@ -351,8 +350,7 @@ def check_study_output(study_dir: Path) -> None:
     before anything is said."""
     from trustroute.core.output_files import check_output_dir
 
-    check_output_dir(study_dir, "--out", "study directory")
-    check_outside_package(study_dir, "--out", "study directory")
+    check_output_dir(study_dir, "--out", "study directory")   # (in a package too: read-only)
 
 
 def validate_study(config: StudyConfig | StudyContext, scheduler: str | None = None,

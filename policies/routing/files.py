@@ -25,6 +25,7 @@ import numpy as np
 
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_bytes, atomic_write_text
+from trustroute.core.package import check_outside_package
 from trustroute.core.validation import MAX_ARRAY_BYTES, check_keys, decode_utf8, parse_json, read_input_bytes
 from trustroute.core.wording import shown_value
 from trustroute.networks.town import Town
@@ -82,6 +83,7 @@ def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec:
     population: the POPULATION_KEYS entries of a policy made for several driver types (driver and
     spec are then the lifted ones, policies/belief/driver_types.py)."""
     path = Path(path)
+    check_outside_package(path, "--out", "policy file")   # every door's: a package is read-only
     table = result.policy.table
     kind = table_kind(table)
     arrays = array_path(path)

@@ -115,6 +115,17 @@ def test_bad_input_is_one_line(config_path, capsys, tmp_path, args, where):
     assert code == 2 and err.count("\n") == 1 and where in err, err
 
 
+def test_a_plan_folder_in_a_package_is_refused_before_any_simulation(config_path, capsys, tmp_path):
+    """A package (its config and tables folder) is published read-only: the plan's folder in one is
+    one line naming it, before the simulations, and nothing is written there."""
+    package = tmp_path / "package"
+    (package / "tables").mkdir(parents=True)
+    (package / "study_config.json").write_text("{}")
+    code, out, err = run_cli(capsys, "plan", str(config_path), "--out", str(package / "plan"))
+    assert code == 2 and err.count("\n") == 1 and f"lies in the package {package}" in err, err
+    assert sorted(p.name for p in package.rglob("*")) == ["study_config.json", "tables"]
+
+
 REPO = Path(__file__).resolve().parents[2]
 DEMO_PREREGISTRATION = REPO / "docs" / "preregistration_demo.md"
 

@@ -87,6 +87,18 @@ def test_replay_of_a_study_made_with_other_code_fails(sumo_study, tmp_path, caps
     assert err.count("\n") == 1 and "made with trustroute 0.0.1" in err and "Traceback" not in err
 
 
+def test_a_recording_in_a_package_is_refused_before_the_replay(sumo_study, tmp_path, capsys):
+    """A package (its config and tables folder) is published read-only: a recording to write in
+    one is one line naming it, before the episode runs, and nothing is written there."""
+    package = tmp_path / "package"
+    (package / "tables").mkdir(parents=True)
+    (package / "study_config.json").write_text("{}")
+    code, out, err = run_cli(capsys, "replay", str(sumo_study), "p00000-phi1-aware", "--rrd",
+                             str(package / "replay.rrd"))
+    assert code == 2 and out == "" and err.count("\n") == 1 and f"lies in the package {package}" in err
+    assert sorted(p.name for p in package.rglob("*")) == ["study_config.json", "tables"]
+
+
 def _tamper_trust(study, episode_id, index):
     """Change the logged trust after road `index` of `episode_id` by one level."""
     _tamper(study, "roads", episode_id, "trust_after", lambda t: t + 1 if t < 7 else t - 1, index)

@@ -166,6 +166,8 @@ BAD = {
     "bad belief rule": (MINIMAL + 'belief_rule = "magic"\n', "study.belief_rule"),
     "name leaving studies/": (MINIMAL + 'name = "../../x"\n', "study.name"),
     "absolute name": (MINIMAL + 'name = "/tmp/x"\n', "study.name"),
+    "NUL in the output": (MINIMAL + 'output = "o\\u0000ut"\n', "study.output"),
+    "NUL in the cache": (MINIMAL + 'policy_cache = "po\\u0000l"\n', "study.policy_cache"),
 }
 
 

@@ -34,7 +34,7 @@ from trustroute.app.inputs import driver_of, population_of
 from trustroute.core import defaults, ranges
 from trustroute.core.errors import InputError
 from trustroute.core.fields import OneOf, check_value
-from trustroute.core.output_files import atomic_write_text
+from trustroute.core.output_files import atomic_write_text, check_output_dir
 from trustroute.core.progress import bar_disable
 from trustroute.harness.study.config import StudyConfig, load_study_config
 from trustroute.harness.study.context import study_context
@@ -141,6 +141,8 @@ def plan_study(config_path: str | Path, settings: PlanSettings = PlanSettings(),
     study = load_study_config(config_path)   # what is registered: the study as it will run
     config = study.with_overrides(engine="model")   # what is simulated
     check_plannable(config)
+    folder = check_output_dir(Path(settings.out) if settings.out is not None else DEFAULT_OUT / config.name,
+                              "--out", "plan folder")   # before the simulations, not after them
     cells = len(config.spec_names) * len(config.condition_names)
     size_list = participant_sizes(settings.sizes, cells)
     power = PowerSettings(tests=tuple(settings.tests) or DEFAULT_TESTS, alpha=settings.alpha,
@@ -161,7 +163,6 @@ def plan_study(config_path: str | Path, settings: PlanSettings = PlanSettings(),
     echo = None if progress is None else (lambda size, n: progress(f"  N={size}: {n} studies"))
     table = estimate_power(simulate, size_list, power, echo)
     minimal = minimal_sizes(table, settings.target)
-    folder = Path(settings.out) if settings.out is not None else DEFAULT_OUT / config.name
     folder.mkdir(parents=True, exist_ok=True)
     who = model.label if model is not None else "the config's driver model"
     judged = f"satisfaction on beliefs from: {source}"

@@ -63,12 +63,13 @@ def package_holding(path: Path) -> Path | None:
 
 
 def check_outside_package(path: Path, option: str, what: str) -> None:
-    """InputError naming the package when the `what` folder `path` (given by `option`) lies in one."""
+    """InputError naming the package when the `what` (a file or folder) `path`, given by `option`,
+    lies in one."""
     package = package_holding(path)
     if package is not None:
         raise InputError(str(path), option, f"the {what} lies in the package {package}, which is "
                          "published read-only: a run writes nothing into it",
-                         f"pass {option} a folder outside the package")
+                         f"pass {option} a path outside the package")
 
 
 def outside_packages(folder: str | None) -> str | None:

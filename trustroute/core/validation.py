@@ -51,6 +51,8 @@ MAX_FILE_NAME = 64
 # default folder): no path separators, NUL or leading dot, so it cannot point outside its folder.
 FILE_NAME = re.compile(rf"[A-Za-z0-9_][A-Za-z0-9_.+-]{{0,{MAX_FILE_NAME - 1}}}")
 FILE_NAME_RULE = f"1-{MAX_FILE_NAME} letters, digits, '_', '.', '+' or '-', not starting with '.'"
+# A folder's path an input names: anything but a NUL byte, which no file system takes
+PATH_TEXT = re.compile(r"[^\x00]+")
 
 _JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"', re.DOTALL)
 _TOML_STRINGS = re.compile(
