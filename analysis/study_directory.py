@@ -18,6 +18,7 @@ import pandas as pd
 from trustroute.core.dataset import (
     EPISODES_FILE,
     MANIFEST_FILE,
+    REBUILD_FIX,
     ROADS_FILE,
     check_allowed,
     read_episodes,
@@ -25,7 +26,7 @@ from trustroute.core.dataset import (
     read_roads,
 )
 from trustroute.core.errors import InputError
-from trustroute.core.package import tables_folder, verify_package
+from trustroute.core.package import PACKAGE_TABLE_FIX, is_package, tables_folder, verify_package
 from trustroute.harness.study.context import load_study_inputs
 from trustroute.harness.study.inputs import MANIFEST_FIX, relocated_config, spec_path, verify_inputs
 from trustroute.networks.town import Town
@@ -61,14 +62,15 @@ def check_logged_inputs(study_dir: Path, episodes: pd.DataFrame, roads: pd.DataF
     """The tables name only what the study's inputs have, or InputError naming the file, column and
     first row that does not: roads of the town, incidents of the driver model, specs of the study."""
     town, driver, specs = inputs
-    tables = tables_folder(study_dir)
+    packaged = is_package(study_dir)
+    tables, fix = tables_folder(study_dir, packaged), PACKAGE_TABLE_FIX if packaged else REBUILD_FIX
     roads_file, episodes_file = (str(tables / name) for name in (ROADS_FILE, EPISODES_FILE))
     check_allowed(episodes["spec"], specs, episodes_file, "spec",
-                  f"one of the study's specs ({', '.join(specs)})")
+                  f"one of the study's specs ({', '.join(specs)})", fix)
     check_allowed(roads["directed_road"], town.states, roads_file, "directed_road",
-                  "a road of the study's town")
+                  "a road of the study's town", fix)
     check_allowed(roads["incident"], driver.incident_types, roads_file, "incident",
-                  f"an incident type of the study's driver model ({', '.join(driver.incident_types)})")
+                  f"an incident type of the study's driver model ({', '.join(driver.incident_types)})", fix)
 
 
 def study_inputs(manifest: dict, study_dir: Path):

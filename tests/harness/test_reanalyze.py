@@ -104,6 +104,24 @@ def test_a_tampered_package_is_refused_naming_the_file(study, tmp_path, capsys):
     assert out == ""
 
 
+def test_a_package_table_naming_a_road_its_town_lacks_gives_a_package_s_fix(study, tmp_path, capsys):
+    """A table whose sums were written again over an edit that names a road the town lacks: one line
+    naming the file, the row and the package's fix, not a study directory's (rerun the study)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    package = exported(capsys, study, tmp_path / "package")
+    roads = package / "tables" / "roads.parquet"
+    table = pq.read_table(roads)
+    frame = table.to_pandas()
+    frame.loc[0, "directed_road"] = "NO-WHERE"
+    pq.write_table(pa.Table.from_pandas(frame, schema=table.schema, preserve_index=False), roads)
+    resummed(package)
+    code, out, err = run_cli(capsys, "analyze", str(package), "--json")
+    assert_one_line_error(code, err, str(roads), "directed_road, row 0")
+    assert "get the package again" in err and "rerun `trustroute study`" not in err and out == ""
+
+
 @pytest.mark.slow
 def test_true_source_of_drivers_by_number_is_said_not_available(pilot_study, tmp_path, capsys):
     # a [population]: each participant's driver sampled by their number; a copy, as an export
