@@ -122,7 +122,11 @@ def test_an_exported_live_study_reads_back_against_its_codebook(tmp_path, capsys
     assert "Participants: 2 planned, 2 with data in this package, 0 withdrawn" in readme
     assert "0 did not take part" in readme
     code, _, err = run_cli(capsys, "export", str(study_dir), "--out", str(package))
-    assert code == 2 and "not empty" in err
+    assert code == 2 and f"lies in the package {package}" in err   # published read-only
+    (tmp_path / "taken").mkdir()
+    (tmp_path / "taken" / "notes.txt").write_text("kept")
+    code, _, err = run_cli(capsys, "export", str(study_dir), "--out", str(tmp_path / "taken"))
+    assert code == 2 and "not empty" in err and (tmp_path / "taken" / "notes.txt").read_text() == "kept"
     # re-analysed from its package, the study gives its own figures, field by field (the order of
     # its runs read from the package's attempts, its participants under their codes)
     own, packaged = (analyzed(capsys, folder) for folder in (study_dir, package))
