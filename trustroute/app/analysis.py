@@ -18,7 +18,6 @@ from trustroute.analysis.study.analysis import StudyAnalysis, study_analysis
 from trustroute.analysis.study.report import ReportPaths, write_report
 from trustroute.analysis.study_directory import load_study
 from trustroute.core.dataset import CARLA_LOGS_ENGINE
-from trustroute.core.errors import InputError
 from trustroute.core.package import check_outside_package, is_package
 
 # why a package of an imported study gives no real-study analysis (the one figure it cannot give)
@@ -41,14 +40,10 @@ class AnalyzedStudy:
 def report_wanted(study_dir: Path, report: bool | None, default: bool, out: Path | None) -> bool:
     """Whether to write the report: as asked, else when a folder is named (`out`), else `default`
     for a study directory and never for a package; asked for a package without `out`, InputError."""
-    packaged = is_package(study_dir)
     if report is None:
-        report = out is not None or (default and not packaged)
-    if report and packaged and out is None:
-        raise InputError(str(study_dir), "--out", "a package is published read-only: analyze writes no "
-                         "report into it", "pass --out DIR, the folder for the report (or --no-report)")
-    if report and out is not None:
-        check_outside_package(Path(out), "--out", "report folder")
+        report = out is not None or (default and not is_package(study_dir))
+    if report:   # into `out`, or the study directory: in a package neither (it is read-only)
+        check_outside_package(Path(study_dir if out is None else out), "--out", "report folder")
     return report
 
 
