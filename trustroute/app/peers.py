@@ -47,10 +47,16 @@ class ComparedProblem:
     horizon: int | None = None
 
 
-def loaded_problem(problem: ComparedProblem) -> tuple:
-    """(spec, our POMDP) for one comparison, the spec one a peer can state."""
+def exportable_inputs(problem: ComparedProblem):
+    """The problem's inputs, its spec one a peer can state (else InputError)."""
     inputs = load_inputs(problem.spec_path, problem.town_path, problem.driver_path)
     check_exportable(inputs.spec)
+    return inputs
+
+
+def loaded_problem(problem: ComparedProblem) -> tuple:
+    """(spec, our POMDP) for one comparison, the spec one a peer can state."""
+    inputs = exportable_inputs(problem)
     return inputs.spec, build_pomdp(inputs.town, inputs.model)
 
 
@@ -120,9 +126,7 @@ def storm_exact_comparison(problem: ComparedProblem, progress: bool = False) -> 
     from trustroute.policies.peer.storm import require_storm, storm_exact_value
 
     require_storm("trustroute peer storm --exact")
-    inputs = load_inputs(problem.spec_path, problem.town_path, problem.driver_path)
-    check_exportable(inputs.spec)
-    compiled = compile_problem(inputs)
+    compiled = compile_problem(exportable_inputs(problem))
     spec, pomdp = compiled.spec, compiled.pomdp
     with step_progress("peer storm", progress) as step:
         step("our evaluation of the baseline route")
