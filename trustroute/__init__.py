@@ -34,7 +34,7 @@ from trustroute.core.wording import shown_value
 if TYPE_CHECKING:
     from trustroute.analysis.study.analysis import StudyAnalysis
     from trustroute.app.runs import EpisodeSettings
-    from trustroute.app.synthesis import SynthesisSettings
+    from trustroute.app.synthesis import EvaluationOutcome, SynthesisSettings
     from trustroute.harness.simulation.episode import EpisodeRecord
     from trustroute.harness.study.config import StudyConfig
     from trustroute.harness.study.runner import StudyRun
@@ -42,7 +42,6 @@ if TYPE_CHECKING:
     from trustroute.participants.driver_model import DriverModel
     from trustroute.participants.driver_population import DriverPopulation
     from trustroute.policies.belief.problem import Problem
-    from trustroute.policies.evaluation.plain import Evaluation
     from trustroute.policies.evaluation.settings import EvaluationSettings
     from trustroute.policies.logic.spec import Spec
     from trustroute.policies.routing.protocol import RoutingPolicy
@@ -183,9 +182,13 @@ def _policy(policy: PolicyLike, problem: Problem, cache_dir: PathLike | None) ->
 def evaluate(spec: Spec | PathLike, policy: PolicyLike = defaults.POLICY,
              town: Town | PathLike | None = None, driver: DriverModel | PathLike | None = None, *,
              settings: EvaluationSettings | None = None, cache_dir: PathLike | None = None,
-             population: DriverPopulation | PathLike | None = None, **options: Any) -> Evaluation:
+             population: DriverPopulation | PathLike | None = None,
+             **options: Any) -> EvaluationOutcome:
     """The exact probability that `policy` satisfies `spec`, its expected final trust and how
-    episodes end (no sampling; `value.lower`/`value.upper` certify it).
+    episodes end (no sampling; `value.lower`/`value.upper` certify it): an Evaluation
+    (`trustroute.app.synthesis.EvaluationOutcome`) whose `fallback_only` says what drives when the
+    policy is a synthesized one with no decision (None when it has one), as `trustroute evaluate`
+    warns and `trustroute.synthesize(...).fallback_only` says.
 
     policy: "free" (the trust-free shortest route), "aware" (synthesized for 20 junctions and
     cached in `cache_dir`), a policy file, a SynthesisResult or any RoutingPolicy.
@@ -196,7 +199,9 @@ def evaluate(spec: Spec | PathLike, policy: PolicyLike = defaults.POLICY,
     "Episodes"), belief_rule, ...
     population: a driver population (instead of `driver`): the value over its mixture of types,
     the AV filtering with its type-aware model; policy "free", "robust", "bayes" or a population
-    policy file (docs/driver_types.md), as `trustroute evaluate --population`.
+    policy file (docs/driver_types.md), as `trustroute evaluate --population`. `value.type_values`
+    is then the policy's certified value per driver type (None without a population), as a
+    population synthesis' `type_values`.
     """
     from trustroute.app.synthesis import EvaluationSettings, evaluate_problem
     from trustroute.core.settings import with_options

@@ -375,23 +375,36 @@ def evaluate(spec_path: str, policy_name: str, options: EvaluateOptions) -> None
     is exact (lower = upper) unless histories were pruned; their live mass is the width.
     """
     from trustroute.app.policy import PolicySettings, policy_for
-    from trustroute.app.synthesis import check_evaluation, evaluate_single
+    from trustroute.app.synthesis import evaluate_problem
 
     settings = options.settings()
     problem = load_problem(spec_path, options.town_path, options.driver_path, options.population_path)
-    check_evaluation(problem, settings)
-    policy = policy_for(problem, policy_name, PolicySettings(cache_dir=options.cache_dir,
-                                                             progress=not (options.as_json or options.quiet)))
-    if problem.population is not None:
-        _evaluate_population(problem, policy, settings, options.as_json, f"policy {policy_name}")
-        return
-    spec = problem.spec
-    value = evaluate_single(problem, policy, settings)
+    making = PolicySettings(cache_dir=options.cache_dir, progress=not (options.as_json or options.quiet))
+    value = evaluate_problem(problem, lambda: policy_for(problem, policy_name, making), settings)
+    payload, lines = _evaluation_output(problem, value)
+    _mark_fallback_only(payload, f"policy {policy_name}", value.fallback_only)
+    emit(options.as_json, payload, lines)
+
+
+def _evaluation_output(problem, value) -> tuple[dict, list[str]]:
+    """`evaluate`'s JSON and text of `value` (an EvaluationOutcome): with its per-type values
+    (`type_values`, a population's) the value over the mixture and per type, else the episode ends
+    and what pruning cut."""
+    spec = problem.given_spec
     payload = value.to_dict()
     payload["spec"] = spec.name
     payload["expected_final_trust"] = finite_or_none(value.expected_final_trust)
     payload["expected_junctions"] = finite_or_none(value.expected_junctions)
-    _mark_fallback_only(payload, f"policy {policy_name}", policy)
+    types = value.type_values
+    if types is not None:
+        population = problem.population
+        payload["population"] = {"file": population.source_path, "content_hash": population.content_hash,
+                                 "type_values": [t.to_dict() for t in types]}
+        return payload, [
+            f"{spec.name} / {value.policy} over the population's {population.n_types} driver types: "
+            f"P(satisfied) in {interval(value.lower, value.upper)}, E[final trust] = "
+            f"{value.expected_final_trust:.4f}",
+            "per type: " + "; ".join(type_value_text(t) for t in types)]
     lines = [
         f"{spec.name} / {value.policy}: P(satisfied) in {interval(value.lower, value.upper)}, "
         f"E[final trust] = {value.expected_final_trust:.4f}, E[junctions] = "
@@ -399,15 +412,13 @@ def evaluate(spec_path: str, policy_name: str, options: EvaluateOptions) -> None
         "episode ends: " + ", ".join(f"{k} {v:.4f}" for k, v in value.end_mass.items())]
     if value.pruning is not None:
         lines.append(_pruning_line(value))
-    emit(options.as_json, payload, lines)
+    return payload, lines
 
 
-def _mark_fallback_only(payload: dict, what: str, policy) -> None:
-    """A synthesized policy that is only its fallback: one line on stderr and `"fallback_only":
-    true` in the JSON (the key only then, so the output of every other policy is unchanged)."""
-    from trustroute.app.synthesis import fallback_only
-
-    fallback = fallback_only(policy)
+def _mark_fallback_only(payload: dict, what: str, fallback: str | None) -> None:
+    """A synthesized policy that is only its fallback (`fallback`: what drives, in words; None
+    otherwise): one line on stderr and `"fallback_only": true` in the JSON (the key only then, so
+    the output of every other policy is unchanged)."""
     if fallback is not None:
         click.echo(f"warning: {what} has no synthesized decision (0 rows): it is only its fallback, "
                    f"{fallback}; the values below are the fallback's", err=True)
@@ -426,23 +437,3 @@ def _pruning_line(value) -> str:
                      for k, label in parts.items() if pruning["pruned_nodes"][k])
     return (f"bracket width {value.gap:.2e} = live mass of the pruned histories, from junction "
             f"{pruning['first_pruned_level']}: {cuts}")
-
-
-def _evaluate_population(problem, policy, settings, as_json: bool, what: str) -> None:
-    """`evaluate --population`: exact value over the mixture and per type."""
-    from trustroute.app.synthesis import evaluate_population
-
-    population, spec = problem.population, problem.given_spec
-    value, types = evaluate_population(problem, policy, settings)
-    payload = value.to_dict()
-    payload["spec"] = spec.name
-    payload["expected_final_trust"] = finite_or_none(value.expected_final_trust)
-    payload["expected_junctions"] = finite_or_none(value.expected_junctions)
-    payload["population"] = {"file": population.source_path, "content_hash": population.content_hash,
-                             "type_values": [t.to_dict() for t in types]}
-    _mark_fallback_only(payload, what, policy)
-    emit(as_json, payload, [
-        f"{spec.name} / {value.policy} over the population's {population.n_types} driver types: "
-        f"P(satisfied) in {interval(value.lower, value.upper)}, E[final trust] = "
-        f"{value.expected_final_trust:.4f}",
-        "per type: " + "; ".join(type_value_text(t) for t in types)])

@@ -29,7 +29,7 @@ from gymnasium import spaces
 from trustroute.app.drivers import draw_type, gym_episode_id, synthetic_driver
 from trustroute.app.engines import SIMULATED, check_sumo_only, engine_named
 from trustroute.app.problem import load_problem
-from trustroute.app.synthesis import EvaluationSettings, evaluate_problem
+from trustroute.app.synthesis import EvaluationOutcome, EvaluationSettings, evaluate_problem
 from trustroute.core import defaults
 from trustroute.core.errors import InputError, keyword_names
 from trustroute.core.fields import PROBABILITY, check_value
@@ -51,7 +51,6 @@ if TYPE_CHECKING:
     from collections.abc import Callable, Hashable, Mapping
 
     from trustroute.harness.simulation.episode_record import EpisodeRecord
-    from trustroute.policies.evaluation.plain import Evaluation
     from trustroute.policies.model.trust_pomdp import BeliefRule
 
 ENV_ID = "trustroute/TrustRouting-v0"
@@ -367,13 +366,14 @@ class TrustRoutingEnv(gymnasium.Env):
         return ActingPolicy(self, act, name)
 
     def evaluate_agent(self, act: Callable[[dict], Any], *, max_nodes: int | None = None,
-                       time_limit: float | None = None) -> Evaluation:
+                       time_limit: float | None = None) -> EvaluationOutcome:
         """The exact probability that the agent `act` (deterministic, observation -> action) is
         rewarded in an episode of this environment, certified in [lower, upper]: its expected return,
         by `trustroute.evaluate`'s unfolding with this environment's junction cap, belief rule and
-        no fallback (over the population's mixture of types when it has one). max_nodes and
-        time_limit bound the unfolding as `trustroute.evaluate`'s do (fewer nodes or less time: a
-        wider bracket), under the same rules (an InputError naming the keyword)."""
+        no fallback (over the population's mixture of types when it has one, each type's value in
+        `type_values`). max_nodes and time_limit bound the unfolding as `trustroute.evaluate`'s do
+        (fewer nodes or less time: a wider bracket), under the same rules (an InputError naming the
+        keyword)."""
         try:
             settings = EvaluationSettings(fallback_after=None, max_junctions=self.setup.junction_cap,
                                           belief_rule=self._belief_rule, max_nodes=max_nodes,

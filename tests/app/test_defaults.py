@@ -151,6 +151,20 @@ def test_each_packaged_population_evaluates_alike(capsys, population):
     assert shown["types"] and (cli_value["lower"], cli_value["upper"]) == (api.lower, api.upper)
 
 
+@pytest.mark.parametrize("spec", ["phi1", "phi1_trust"])   # the plain unfolding per type, the joint one
+def test_a_population_evaluation_gives_each_type_alike_through_the_api_and_the_cli(capsys, spec):
+    """Both doors take the per-type values from one evaluation (trustroute/app/synthesis.py,
+    `evaluate_problem`): the API's `type_values` are the CLI's `population.type_values`; one driver
+    model has none."""
+    api = trustroute.evaluate(spec, population="driver_population_three_types")
+    cli_value = cli_json(capsys, "evaluate", spec, "free", "--population", "driver_population_three_types")
+    assert api.type_values is not None and [t.name for t in api.type_values] == ["builder", "flat", "wary"]
+    assert len({t.lower for t in api.type_values}) == 3   # three different values, not one copied
+    assert [t.to_dict() for t in api.type_values] == cli_value["population"]["type_values"]
+    assert (cli_value["lower"], cli_value["upper"]) == (api.lower, api.upper)
+    assert trustroute.evaluate(spec).type_values is None
+
+
 @pytest.mark.slow
 def test_one_episode_is_the_same_through_the_api_and_the_cli(capsys):
     api = trustroute.run_episode("phi2", seed=3)

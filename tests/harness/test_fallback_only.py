@@ -53,6 +53,22 @@ def test_the_api_result_says_what_drives_when_it_is_only_its_fallback():
     assert robust.result.fallback_only is not None
 
 
+def test_the_api_evaluation_says_what_drives_when_the_policy_is_only_its_fallback(tmp_path, capsys):
+    """`trustroute.evaluate(...).fallback_only` is the fallback `trustroute evaluate` warns of, for a
+    policy file and a SynthesisResult alike; None for a policy with rows and for "free"."""
+    import trustroute
+
+    out = tmp_path / "h1.json"
+    only = trustroute.synthesize("phi1", horizon=1, out=out)
+    code, _, err = run_cli(capsys, "evaluate", "phi1", str(out), "--json")
+    assert code == 0 and "only its fallback" in err
+    for policy in (out, only):
+        said = trustroute.evaluate("phi1", policy).fallback_only
+        assert said == only.fallback_only is not None and f"only its fallback, {said};" in err
+    assert trustroute.evaluate("phi1", trustroute.synthesize("phi1", horizon=8)).fallback_only is None
+    assert trustroute.evaluate("phi1", "free").fallback_only is None
+
+
 @pytest.mark.slow
 def test_a_robust_synthesis_without_rows_says_so(tmp_path, capsys):
     code, stdout, err = run_cli(capsys, "synth", "phi1", "--horizon", "3", "--population",

@@ -5,7 +5,7 @@ policy file written where asked."""
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 from trustroute.core import defaults, ranges
@@ -206,16 +206,44 @@ def evaluate_population(problem: Problem, policy: RoutingPolicy,
             tuple(per_type_values(problem.pomdp, problem.spec, policy, population, cap, rule, after)))
 
 
+@dataclass(frozen=True)
+class EvaluationOutcome(Evaluation):
+    """An evaluation as every door reports it (`evaluate_problem`): the Evaluation, and
+    type_values: the policy's certified value per driver type when the problem has a population
+        (None without one), as a population synthesis gives its policy's
+        (`PopulationSynthesis.type_values`);
+    fallback_only: what drives everywhere, in words, when the policy is a synthesized one with no
+        decision row (`fallback_only`), so that its values are the fallback's; None otherwise, as
+        `SynthesisResult.fallback_only`.
+    `to_dict()` is the Evaluation's: each door places these two as it reports them."""
+
+    type_values: tuple[TypeValue, ...] | None = None
+    fallback_only: str | None = None
+
+    @classmethod
+    def of(cls, value: Evaluation, type_values: tuple[TypeValue, ...] | None,
+           fallback: str | None) -> EvaluationOutcome:
+        shared = {f.name: getattr(value, f.name) for f in fields(Evaluation)}
+        return cls(**shared, type_values=type_values, fallback_only=fallback)
+
+    def to_dict(self) -> dict:
+        out = super().to_dict()
+        del out["type_values"], out["fallback_only"]
+        return out
+
+
 def evaluate_problem(problem: Problem, make_policy: Callable[[], RoutingPolicy],
-                     settings: EvaluationSettings) -> Evaluation:
+                     settings: EvaluationSettings) -> EvaluationOutcome:
     """The certified value of the policy `make_policy` gives, on `problem` (over the population's
-    mixture of types when it has one): the limits checked first (`check_evaluation`), so that a
-    bad one is refused before a policy is synthesized or read."""
+    mixture of types when it has one, and per type), and whether that policy is only its fallback:
+    the limits checked first (`check_evaluation`), so that a bad one is refused before a policy is
+    synthesized or read."""
     check_evaluation(problem, settings)
     policy = make_policy()
     if problem.population is not None:
-        return evaluate_population(problem, policy, settings)[0]
-    return evaluate_single(problem, policy, settings)
+        value, types = evaluate_population(problem, policy, settings)
+        return EvaluationOutcome.of(value, types, fallback_only(policy))
+    return EvaluationOutcome.of(evaluate_single(problem, policy, settings), None, fallback_only(policy))
 
 
 @dataclass(frozen=True)

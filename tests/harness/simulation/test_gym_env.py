@@ -287,7 +287,7 @@ def test_an_agents_value_is_trustroute_evaluates_of_its_policy(population):
     api = trustroute.evaluate("phi1_strict", env.agent_policy(agent), population=population,
                               fallback_after=None, max_junctions=10, belief_rule="paper")
     untimed = [{k: v for k, v in found.to_dict().items() if k != "seconds"} for found in (value, api)]
-    assert untimed[0] == untimed[1]
+    assert untimed[0] == untimed[1] and value.type_values == api.type_values
     if population is not None:
         with pytest.raises(InputError, match="^max_nodes: the pruning limits are not used"):
             env.evaluate_agent(agent, max_nodes=5)
