@@ -183,3 +183,39 @@ def test_the_api_writes_nothing_into_a_package(tmp_path):
     with pytest.raises(InputError, match="cache_dir: the policy cache lies in the package"):
         trustroute.evaluate("phi1", "aware", cache_dir=package / "cache")
     assert sorted(p.name for p in package.rglob("*")) == ["study_config.json", "tables"]
+
+
+def test_the_api_refuses_a_policy_file_it_cannot_write_before_any_work(tmp_path, monkeypatch):
+    """`synthesize(out=...)` checks its policy file as `trustroute synth --out` does, before the
+    problem is compiled or anything synthesized: in a package, one of the files it reads (the
+    spec), a directory; for one driver model and for a population alike."""
+    import trustroute.app.synthesis as synthesis_module
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("work began before the policy file was checked")
+
+    monkeypatch.setattr(trustroute, "_compiled", no_work)
+    monkeypatch.setattr(synthesis_module, "synthesize_problem", no_work)
+    monkeypatch.setattr(synthesis_module, "synthesize_for_population", no_work)
+    package = tmp_path / "package"
+    (package / "tables").mkdir(parents=True)
+    (package / "study_config.json").write_text("{}")
+    spec = tmp_path / "route.toml"
+    spec.write_text((Path(trustroute.__file__).parent / "core" / "specs" / "phi1.toml").read_text())
+    for population in (None, POPULATION):
+        with pytest.raises(InputError, match="out: the policy file lies in the package"):
+            trustroute.synthesize("phi1", horizon=4, population=population, out=package / "policy.json")
+        with pytest.raises(InputError, match="out: the policy file would overwrite spec"):
+            trustroute.synthesize(spec, horizon=4, population=population, out=spec)
+        with pytest.raises(InputError, match="out: the policy file path is a directory"):
+            trustroute.synthesize("phi1", horizon=4, population=population, out=tmp_path)
+    assert sorted(p.name for p in package.rglob("*")) == ["study_config.json", "tables"]
+
+
+def test_the_api_checks_the_report_folder_before_reading_the_study(tmp_path):
+    """`analyze(out=...)` checks the folder its report goes to as `trustroute analyze --out` does,
+    before the study is read (one rule, trustroute/app/analysis.py `report_wanted`)."""
+    taken = tmp_path / "report"
+    taken.write_text("a file")
+    with pytest.raises(InputError, match="out: the report folder exists and is not a directory"):
+        trustroute.analyze(tmp_path / "no-study", out=taken)

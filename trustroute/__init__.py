@@ -132,7 +132,8 @@ def synthesize(spec: Spec | PathLike, town: Town | PathLike | None = None,
     `settings`: horizon (at most this many junctions; None: unbounded), tau (stop when
     upper - lower <= tau), time_limit (seconds, about), belief_rule (the AV's filter, exact
     "bayes" or the authors' "paper" update, docs/model.md), ... out: also write the policy file
-    there (docs/formats/policy_file.md). `result.policy` is the policy; `result.lower` is its
+    there (docs/formats/policy_file.md); checked before any work, as `trustroute synth --out`
+    checks it (writable, no input file, in no package). `result.policy` is the policy; `result.lower` is its
     exact value; `result.fallback_only` says what drives when the policy has no synthesized
     decision (None when it has one), as `trustroute synth` warns.
 
@@ -144,6 +145,7 @@ def synthesize(spec: Spec | PathLike, town: Town | PathLike | None = None,
     """
     from trustroute.app.synthesis import (
         SynthesisSettings,
+        check_policy_out,
         check_synthesis_options,
         synthesize_population,
         synthesize_single,
@@ -154,6 +156,8 @@ def synthesize(spec: Spec | PathLike, town: Town | PathLike | None = None,
     chosen = with_options(settings, SynthesisSettings(), options, "synthesize")
     check_time_limit(chosen.time_limit)
     check_synthesis_options(population is not None, objective, chosen.clusters)
+    if out is not None:   # before any work, as `trustroute synth --out`
+        check_policy_out(out, {"spec": spec, "--town": town, "--driver": driver, "--population": population})
     problem = _compiled(spec, town, driver, population)
     if problem.population is not None:
         return synthesize_population(problem, objective, chosen, out)
@@ -293,8 +297,11 @@ def analyze(study_dir: PathLike, *, belief_source: str | None = defaults.BELIEF_
     report.html and the plots into `out` (default: the study directory); by default nothing is
     written unless `out` is given, as with `trustroute analyze --json` (the analysis is handed over
     as data; the command printing its tables rewrites the report, trustroute/core/defaults.py
-    `REPORT_WITH_DATA`). `study_dir` may be a package `trustroute export` wrote: its figures are the
-    study's, and its report is written only into `out` (trustroute/app/analysis.py).
+    `REPORT_WITH_DATA`). out: the report's folder, checked before any work when the report is
+    written there; with report=False nothing is written, so `out` is neither used nor checked (as
+    `trustroute analyze --no-report --out`: one rule, trustroute/app/analysis.py `report_wanted`).
+    `study_dir` may be a package `trustroute export` wrote: its figures are the study's, and its
+    report is written only into `out`.
     """
     from trustroute.app.analysis import analyze_study, report_wanted
 

@@ -34,20 +34,22 @@ from trustroute.harness.study.config import BELIEF_SOURCES
     "--report/--no-report",
     default=None,
     help="(Re)write report.md, report.html and plots/ in DIR, or in --out (default: yes, but no with "
-         "--json, which hands the analysis over as data, as the Python API's analyze does; for a "
-         "package, only with --out).",
+         "--json, which hands the analysis over as data, as the Python API's analyze does, unless "
+         "--out is given; for a package, only with --out). --no-report writes nothing, --out "
+         "included.",
 )
 @click.option("--out", type=click.Path(), default=None,
-              help="Folder for the report (default: DIR). A package `trustroute export` wrote is "
-                   "published read-only: its report is written only here.")
+              help="Folder for the report (default: DIR); naming it asks for the report, unless "
+                   "--no-report. Checked only when the report is written there, so with --no-report "
+                   "it is not used. A package `trustroute export` wrote is published read-only: its "
+                   "report is written only here.")
 def analyze(study_dir: str, as_json: bool, belief_source: str | None, wide: bool,
             report: bool | None, out: str | None) -> None:
     """Per spec and condition of the study directory DIR, or of a package `trustroute export`
     wrote: n, satisfaction rate with CI, mean trust, paired tests."""
     from trustroute.app.analysis import analyze_study, report_wanted
-    from trustroute.core.output_files import check_output_dir
 
-    folder = None if out is None else check_output_dir(out, "--out", "report folder")
+    folder = None if out is None else Path(out)
     wanted = report_wanted(Path(study_dir), report,
                            defaults.REPORT_WITH_DATA if as_json else defaults.REPORT_WITH_TABLES, folder)
     warnings = study_warnings(Path(study_dir))

@@ -125,15 +125,17 @@ class SynthOptions:
 @takes(options=SynthOptions)
 def synth(spec_path: str, options: SynthOptions) -> None:
     """Synthesize a trust-aware policy for SPEC with certified bounds lower <= Pr_max <= upper."""
-    from trustroute.app.synthesis import check_synthesis_options, policy_arrays, synthesize_single
-    from trustroute.core.output_files import check_output_file
+    from trustroute.app.synthesis import (
+        check_policy_out,
+        check_synthesis_options,
+        policy_arrays,
+        synthesize_single,
+    )
 
     settings, out_path = options.settings(), options.out_path
     if out_path is not None:
-        reads = {"SPEC": spec_path, "--town": options.town_path, "--driver": options.driver_path,
-                 "--population": options.population_path}
-        check_output_file(out_path, "--out", "policy file", reads)
-        check_output_file(policy_arrays(out_path), "--out", "policy array file (.npz beside it)", reads)
+        check_policy_out(out_path, {"SPEC": spec_path, "--town": options.town_path,
+                                    "--driver": options.driver_path, "--population": options.population_path})
     check_synthesis_options(options.population_path is not None, options.objective, options.clusters)
     problem = load_problem(spec_path, options.town_path, options.driver_path, options.population_path)
     if problem.population is not None:

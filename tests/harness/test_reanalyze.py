@@ -167,6 +167,27 @@ def test_a_package_is_checked_against_what_its_manifest_records(study, tmp_path,
     assert out == ""
 
 
+def test_out_is_the_report_s_folder_alike_at_the_cli_and_the_api(study, tmp_path, capsys):
+    """--out (`out=`) names where the report goes: with --no-report (report=False) nothing is
+    written, so a folder in the package is neither used nor refused, at the CLI as at the API; a
+    report asked there (or by naming the folder alone) is refused at both, before any work."""
+    import trustroute
+    from trustroute.core.errors import InputError
+
+    package = exported(capsys, study, tmp_path / "package")
+    published, inside = files_of(package), package / "report"
+    by_cli = analysed(capsys, package, "--no-report", "--out", str(inside))
+    by_api = trustroute.analyze(package, report=False, out=inside)
+    assert json.loads(json.dumps(by_api.to_dict(), default=str))["cells"] == by_cli["cells"]
+    assert by_cli["cells"] and "report_markdown" not in by_cli
+    for asked in ([], ["--report"]):
+        code, out, err = run_cli(capsys, "analyze", str(package), "--json", "--out", str(inside), *asked)
+        assert_one_line_error(code, err, str(inside), "--out", "read-only")
+        with pytest.raises(InputError, match="out: the report folder lies in the package"):
+            trustroute.analyze(package, report=True if asked else None, out=inside)
+    assert files_of(package) == published and not inside.exists()
+
+
 def test_a_package_whose_drivers_cannot_be_rebuilt_says_so(study, tmp_path, capsys):
     # the model study's drivers are all the nominal model: no number is needed to rebuild them, so
     # a package whose config no trustroute can rebuild lacks "true" for that reason, not its codes

@@ -18,6 +18,7 @@ from trustroute.analysis.study.analysis import StudyAnalysis, study_analysis
 from trustroute.analysis.study.report import ReportPaths, write_report
 from trustroute.analysis.study_directory import load_study
 from trustroute.core.dataset import CARLA_LOGS_ENGINE
+from trustroute.core.output_files import check_output_dir
 from trustroute.core.package import check_outside_package, is_package
 
 # why a package of an imported study gives no real-study analysis (the one figure it cannot give)
@@ -38,12 +39,18 @@ class AnalyzedStudy:
 
 
 def report_wanted(study_dir: Path, report: bool | None, default: bool, out: Path | None) -> bool:
-    """Whether to write the report: as asked, else when a folder is named (`out`), else `default`
-    for a study directory and never for a package; asked for a package without `out`, InputError."""
+    """Whether to write the report, decided once for the CLI and the API, before any work: as asked
+    (`report`), else when a folder is named (`out`), else `default` for a study directory and never
+    for a package. `out` is the report's folder and nothing else: it is checked (a writable
+    directory outside any package, `check_output_dir`) only when the report goes there, and with
+    `report` False nothing is written, so it is neither used nor checked. A report asked for a
+    package without `out` is an InputError (a package is read-only)."""
     if report is None:
         report = out is not None or (default and not is_package(study_dir))
-    if report:   # into `out`, or the study directory: in a package neither (it is read-only)
-        check_outside_package(Path(study_dir if out is None else out), "--out", "report folder")
+    if report and out is not None:
+        check_output_dir(out, "--out", "report folder")
+    elif report:   # into the study directory itself: never a package's
+        check_outside_package(Path(study_dir), "--out", "report folder")
     return report
 
 

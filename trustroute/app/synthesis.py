@@ -4,13 +4,15 @@ policy file written where asked."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields, replace
+from os import PathLike
 from pathlib import Path
 
 from trustroute.core import defaults, ranges
 from trustroute.core.errors import InputError
 from trustroute.core.fields import OneOf, check_value
+from trustroute.core.output_files import check_output_file
 from trustroute.core.ranges import check_time_limit, keep_checked
 from trustroute.core.wording import shown_value
 from trustroute.policies.belief.problem import Problem
@@ -267,6 +269,17 @@ def baseline(problem: Problem, belief_rule: BeliefRule = defaults.BELIEF_RULE) -
 def policy_arrays(path: str | Path) -> Path:
     """The array file written beside a policy file."""
     return array_path(path)
+
+
+def check_policy_out(out: str | Path, reads: Mapping[str, object]) -> None:
+    """Every door's check of the policy file `out` of a synthesis, before any work: it and its array
+    file beside it can be written, lie in no package (published read-only) and are none of the files
+    the synthesis `reads` (argument name -> value; a value that is no path, an object passed
+    instead of a file, reads no file)."""
+    files = {name: value if isinstance(value, str) else Path(value)
+             for name, value in reads.items() if isinstance(value, str | PathLike)}
+    check_output_file(out, "--out", "policy file", files)
+    check_output_file(policy_arrays(out), "--out", "policy array file (.npz beside it)", files)
 
 
 def stop_line(stopped_by: str, tau: float, converged: bool) -> str:
