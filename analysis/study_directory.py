@@ -17,7 +17,6 @@ import pandas as pd
 
 from trustroute.core.dataset import (
     EPISODES_FILE,
-    MANIFEST_FILE,
     REBUILD_FIX,
     ROADS_FILE,
     check_allowed,
@@ -28,7 +27,7 @@ from trustroute.core.dataset import (
 from trustroute.core.errors import InputError
 from trustroute.core.package import PACKAGE_TABLE_FIX, is_package, tables_folder, verify_package
 from trustroute.harness.study.context import load_study_inputs
-from trustroute.harness.study.inputs import MANIFEST_FIX, relocated_config, spec_path, verify_inputs
+from trustroute.harness.study.inputs import manifest_wording, relocated_config, spec_paths, verify_inputs
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
@@ -79,10 +78,11 @@ def study_inputs(manifest: dict, study_dir: Path):
     (harness/study/context.py, `load_study_inputs`); an input that cannot be loaded is an
     InputError naming the manifest and the config key."""
     config = manifest["config"]
-    shown = str(Path(study_dir) / MANIFEST_FILE)
-    town = _recorded_input(config.get("town"), "town", shown)
-    driver = _recorded_input(config.get("driver_model"), "driver model", shown)
-    specs = [spec_path(p) for p in config["specs"]]
+    said = manifest_wording(study_dir)
+    shown, fix = str(Path(study_dir) / said.manifest), said.config_fix
+    town = _recorded_input(config.get("town"), "town", shown, fix)
+    driver = _recorded_input(config.get("driver_model"), "driver model", shown, fix)
+    specs = spec_paths(config, study_dir)
     keyed = [("config.town", town), ("config.driver_model", driver),
              *((f"config.specs[{i}]", str(p)) for i, p in enumerate(specs))]
     try:
@@ -95,15 +95,15 @@ def study_inputs(manifest: dict, study_dir: Path):
         raise InputError(shown, key, f"cannot load {exc.source} ({where}{exc.problem})", exc.fix) from None
 
 
-def _recorded_input(path: str | None, what: str, shown: str) -> str | None:
-    """A town or driver model path the config records (`shown`: the manifest): one of the study's
-    stored copies, or the absolute path of a study made before its inputs were stored; InputError
-    for any other path (never read relative to where the command runs), or when it is gone (no
-    option of a command can stand in)."""
+def _recorded_input(path: str | None, what: str, shown: str, fix: str) -> str | None:
+    """A town or driver model path the config records (`shown`: the manifest, `fix`: the fix of an
+    edited one): one of the study's stored copies, or the absolute path of a study made before its
+    inputs were stored; InputError for any other path (never read relative to where the command
+    runs), or when it is gone (no option of a command can stand in)."""
     key = f"config.{what.replace(' ', '_')}"
     if path is not None and not Path(path).is_absolute():
         raise InputError(shown, key, f"the study's {what} {path!r} is neither one of its stored inputs "
-                         "(inputs/...) nor an absolute path", MANIFEST_FIX)
+                         "(inputs/...) nor an absolute path", fix)
     if path is not None and not Path(path).is_file():
         raise InputError(shown, key,
                          f"the study's {what} {path} is gone, and this study directory holds no copy of "

@@ -46,10 +46,12 @@ from trustroute.analysis.satisfaction import satisfaction_by_source
 from trustroute.core import dataset
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import check_output_dir
+from trustroute.core.package import sha256_of
 from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.core.progress import bar_disable
 from trustroute.core.validation import csv_place
 from trustroute.core.wording import counted
+from trustroute.harness.study.inputs import SPEC_SHA256
 from trustroute.harness.study.manifest import git_revision, package_versions
 from trustroute.harness.study.resume import check_own_folder, study_files
 from trustroute.networks.road import Road
@@ -78,6 +80,7 @@ WARM_UP_SESSION = (3, 0)
 STUDY_SESSIONS = ((1, 0), (1, 1), (2, 0), (2, 1))
 EXPECTED_FILES = (WARM_UP_SESSION, *STUDY_SESSIONS)
 CONDITIONS = {0: "aware", 1: "free"}
+IMPORTED_SPECS = ("phi1.toml", "phi2.toml")   # the packaged specs the authors' study drove
 
 
 def session_name(driver: int, trial: int, baseline: int) -> str:
@@ -503,7 +506,9 @@ def import_carla_logs(
             "name": "carla-real-study",
             "town": None,
             "driver_model": None,
-            "specs": [str(PACKAGED_SPECS / "phi1.toml"), str(PACKAGED_SPECS / "phi2.toml")],
+            "specs": [str(PACKAGED_SPECS / name) for name in IMPORTED_SPECS],
+            # what the specs were, for an analysis where these paths are gone (inputs.py, `found_spec`)
+            SPEC_SHA256: [sha256_of(PACKAGED_SPECS / name) for name in IMPORTED_SPECS],
             "conditions": ["aware", "free"],
             "report_every": 1,
         },
@@ -540,7 +545,7 @@ def import_carla_logs(
 
 def _logged_satisfaction(episodes: pd.DataFrame, roads: pd.DataFrame, town, driver_model) -> np.ndarray:
     """The episode's `satisfied`: its spec on the belief the AV logged (what the AV saw)."""
-    specs = {name: load_spec(PACKAGED_SPECS / f"{name}.toml", town) for name in ("phi1", "phi2")}
+    specs = {Path(name).stem: load_spec(PACKAGED_SPECS / name, town) for name in IMPORTED_SPECS}
     sat = satisfaction_by_source(episodes, roads, specs, town, driver_model.trust_levels)
     return sat["satisfied_logged"].fillna(False).to_numpy(dtype=bool)
 

@@ -15,7 +15,7 @@ from trustroute.analysis.statistics import rate_interval
 from trustroute.analysis.study.design import study_participants
 from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.core.wording import counted
-from trustroute.harness.study.inputs import spec_path
+from trustroute.harness.study.inputs import found_spec
 from trustroute.networks.town import load_town
 from trustroute.policies.logic.spec import load_spec
 
@@ -32,10 +32,11 @@ def is_paper_comparable(manifest: dict, episodes: pd.DataFrame) -> tuple[bool, s
     if town.content_hash != default_town.content_hash:
         reasons.append("another town")
     for name in ("phi1", "phi2"):
-        ours = [p for p in config.get("specs", []) if Path(p).stem == name]
+        ours = [i for i, p in enumerate(config.get("specs", [])) if Path(p).stem == name]
+        found = found_spec(config, ours[0]) if ours else None   # None: not provably any spec
         if (
-            not ours
-            or load_spec(spec_path(ours[0]), town).content_hash
+            found is None
+            or load_spec(found, town).content_hash
             != load_spec(PACKAGED_SPECS / f"{name}.toml", town).content_hash
         ):
             reasons.append(f"not the paper's {name}")

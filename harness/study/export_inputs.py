@@ -194,13 +194,14 @@ def within(study_dir: Path, relative: str) -> Path | None:
     return path if path.resolve().is_relative_to(inputs) and path.is_file() else None
 
 
-def shipped_task(config: dict, packaged: PackagedInputs) -> dict[str, Path]:
+def shipped_task(config: dict, packaged: PackagedInputs, study_dir: Path) -> dict[str, Path]:
     """Fill `packaged` with the task files of a study that stored no copy of its inputs (`config`:
     its manifest's), as the installed package ships them, each under the package's inputs/ as a
     study stores it; relative path -> the file to copy. A file the package does not ship is left
-    out, under its config place, and its config value is kept."""
+    out, under its config place, and its config value is kept. `study_dir`: the study, which an
+    error names (`task_files`)."""
     packaged.shipped, sources = True, {}
-    for key, paths in task_files(config).items():
+    for key, paths in task_files(config, study_dir).items():
         values, many = [], isinstance(config.get(key), list)
         for index, path in enumerate(paths):
             if not TASK_KINDS[key].ships(path):
@@ -235,7 +236,7 @@ def export_inputs(study_dir: Path, manifest: dict, out: Path, key: dict[int, int
     pseudonyms, `registry`: the words of a live study's registry no file may hold (`identifying_names`)."""
     config, packaged = manifest.get("config") or {}, PackagedInputs()
     if manifest.get("inputs") is None:
-        sources: dict[str, Path | None] = {**shipped_task(config, packaged)}
+        sources: dict[str, Path | None] = {**shipped_task(config, packaged, study_dir)}
     else:
         packaged.record = manifest["inputs"].get("files", {})
         sources = {relative: within(study_dir, relative) for relative in packaged.record}

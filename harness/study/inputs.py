@@ -32,7 +32,7 @@ from pathlib import Path
 from trustroute.core.dataset import MANIFEST_FILE
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_bytes
-from trustroute.core.package import PACKAGE_MANIFEST_FILE, SUMS_FILE, TAMPERED_FIX, sha256_of
+from trustroute.core.package import PACKAGE_MANIFEST_FILE, SUMS_FILE, TAMPERED_FIX, is_package, sha256_of
 from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.harness.study.config import NAMED_CONDITIONS
 from trustroute.harness.study.context import (
@@ -51,6 +51,10 @@ from trustroute.policies.resolve import aware_cache_path, population_cache_path
 INPUTS_DIR = "inputs"
 POLICIES_DIR = f"{INPUTS_DIR}/policies"
 MANIFEST_FIX = f"restore {MANIFEST_FILE} from the study directory's original copy"
+# A config key of a study that stores no copy of its inputs (`trustroute import carla-logs` writes
+# it): the SHA-256 of each of its specs, in the order of `specs`, by which `spec_paths` knows the
+# packaged spec of a file name for the one the study read when its recorded path is gone.
+SPEC_SHA256 = "spec_sha256"
 
 
 # What a study directory holds of its inputs: relative path -> {"sha256": ..., "source": ...}.
@@ -162,20 +166,60 @@ def store_inputs(study_dir: Path, context: StudyContext) -> tuple[dict, dict]:
     return recorded, {"dir": INPUTS_DIR, "files": record, "config_sha256": config_sha256(recorded)}
 
 
-def spec_path(path: str) -> Path:
-    """A manifest's spec path; a packaged spec when the recorded path is gone (a study directory
-    shipped with the package, or moved to another machine)."""
-    recorded = Path(path)
+def found_spec(config: dict, index: int) -> Path | None:
+    """The spec file `config.specs[index]` of a manifest's config (as `relocated_config` gives it):
+    at its recorded absolute path (a relative one is never read from where the command runs), or,
+    that path gone (a study that stores no copy of its inputs, moved to another machine), the
+    packaged spec of its file name when it is provably the same spec: the config records the spec's
+    SHA-256 (`SPEC_SHA256`) and the packaged file has it. None otherwise: a packaged spec of the
+    same name may not be the one the study ran (a user's edited file of that name)."""
+    recorded, digest = Path(config["specs"][index]), _recorded_spec_sha256(config, index)
     packaged = PACKAGED_SPECS / recorded.name
-    return recorded if recorded.exists() or not packaged.exists() else packaged
+    if recorded.is_absolute() and recorded.exists():
+        return recorded
+    if digest is not None and packaged.is_file() and sha256_of(packaged) == digest:
+        return packaged
+    return None
 
 
-def task_files(config: dict) -> dict[str, list[Path]]:
-    """The files that define the task of a study (its manifest's config, as `relocated_config`
-    gives it), found as the analysis of a study directory loads them (analysis/study_directory.py,
-    `study_inputs`): the specs by `spec_path`, the town and the driver model the config names, else
-    the packaged default ones (`town_file`, `driver_model_file`). Config key -> its files."""
-    return {"specs": [spec_path(p) for p in config.get("specs") or []],
+def _recorded_spec_sha256(config: dict, index: int) -> str | None:
+    hashes = config.get(SPEC_SHA256) or []
+    return hashes[index] if index < len(hashes) else None
+
+
+def spec_paths(config: dict, study_dir: Path) -> list[Path]:
+    """Every spec file of a manifest's config, each as `found_spec` finds it, of the study directory
+    or package `study_dir`; a spec it finds none for is an InputError naming the manifest,
+    `config.specs[i]` and the fix."""
+    paths = []
+    for index, value in enumerate(config.get("specs") or []):
+        path = found_spec(config, index)
+        if path is None:
+            raise _gone_spec(study_dir, config, index, value)
+        paths.append(path)
+    return paths
+
+
+def _gone_spec(study_dir: Path, config: dict, index: int, value: str) -> InputError:
+    """The error of `spec_paths` for the spec `value`, `config.specs[index]`, that is gone."""
+    said = manifest_wording(study_dir)
+    why = ("" if not (PACKAGED_SPECS / Path(value).name).is_file() else
+           f", and the packaged {Path(value).name} is not provably the spec the study ran ("
+           + ("the manifest records no SHA-256 of it" if _recorded_spec_sha256(config, index) is None
+              else f"its SHA-256 differs from the manifest's config.{SPEC_SHA256}[{index}]") + ")")
+    fix = (said.config_fix if said is _PACKAGE_WORDING else
+           f"restore {value} (the spec the study was run with), or analyse the study where it was made")
+    return InputError(str(Path(study_dir) / said.manifest), f"config.specs[{index}]",
+                      f"the study's spec {value} is gone{why}", fix)
+
+
+def task_files(config: dict, study_dir: Path) -> dict[str, list[Path]]:
+    """The files that define the task of the study in `study_dir` (its manifest's config, as
+    `relocated_config` gives it), found as the analysis of a study directory loads them
+    (analysis/study_directory.py, `study_inputs`): the specs by `spec_paths`, the town and the
+    driver model the config names, else the packaged default ones (`town_file`,
+    `driver_model_file`). Config key -> its files."""
+    return {"specs": spec_paths(config, study_dir),
             "town": [town_file(config.get("town"))],
             "driver_model": [driver_model_file(config.get("driver_model"))]}
 
@@ -191,7 +235,8 @@ def relocated_config(config: dict, study_dir: Path) -> dict:
     in `study_dir`; other values, and the absolute paths of a study made before its inputs were
     stored, stay as they are. A path under inputs/ that leads out of the directory ("inputs/../..")
     is an InputError naming the manifest and the key."""
-    shown = str(Path(study_dir) / MANIFEST_FILE)
+    said = manifest_wording(study_dir)
+    shown = str(Path(study_dir) / said.manifest)
     study_dir = Path(study_dir).resolve()
 
     def place(key: str, value: object) -> object:
@@ -199,7 +244,7 @@ def relocated_config(config: dict, study_dir: Path) -> dict:
             path = study_dir / value
             if not Path(os.path.normpath(path)).is_relative_to(study_dir / INPUTS_DIR):
                 raise InputError(shown, f"config.{key}", f"{value!r} leads out of "
-                                 "the study directory's stored inputs", MANIFEST_FIX)
+                                 "the study directory's stored inputs", said.config_fix)
             return str(path)
         if isinstance(value, list):
             return [place(key, v) for v in value]
@@ -247,6 +292,12 @@ _PACKAGE_WORDING = _Wording(
     PACKAGE_MANIFEST_FILE, f"an input the package's manifest records is missing from {SUMS_FILE}",
     TAMPERED_FIX, "an input the package's manifest records differs from its copy (its SHA-256 in "
     f"{SUMS_FILE} differs from the manifest's)", TAMPERED_FIX, "since the package was exported", TAMPERED_FIX)
+
+
+def manifest_wording(study_dir: Path) -> _Wording:
+    """What a message about the manifest of `study_dir` names: a package's own manifest
+    (study_manifest.json, covered by its SHA256SUMS) and fix, or a study directory's."""
+    return _PACKAGE_WORDING if is_package(study_dir) else _STUDY_WORDING
 
 
 def verify_inputs(manifest: dict, study_dir: Path, checked: dict[str, str] | None = None) -> None:

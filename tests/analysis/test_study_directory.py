@@ -75,3 +75,54 @@ def test_a_town_file_of_the_user_s_own_by_absolute_path_is_still_read(model_stud
     shutil.copyfile(model_study / recorded, own)
     manifest, _, roads = load_study(_with_town(model_study, tmp_path, str(own)))
     assert manifest["config"]["town"] == str(own) and len(roads)
+
+
+REAL_STUDY = Path(__file__).resolve().parents[2] / "analysis" / "data" / "real_study" / "study"
+
+
+def _real_study_naming(tmp_path: Path, spec: str, recorded: list[str] | None) -> Path:
+    """A copy of the imported real study (no stored inputs) whose config names `spec` as its first
+    spec and records `recorded` as its specs' SHA-256 (None: records none)."""
+    study = Path(shutil.copytree(REAL_STUDY, tmp_path / "study"))
+    manifest = json.loads((study / MANIFEST_FILE).read_text())
+    manifest["config"]["specs"][0] = spec
+    if recorded is None:
+        del manifest["config"]["spec_sha256"]
+    else:
+        manifest["config"]["spec_sha256"] = recorded
+    (study / MANIFEST_FILE).write_text(json.dumps(manifest))
+    return study
+
+
+@pytest.mark.parametrize("records", ["none", "the edited file's"])
+def test_a_gone_spec_is_not_read_as_the_packaged_one_of_its_name_unless_it_is_that_one(records, tmp_path,
+                                                                                        monkeypatch):
+    """The study was run with the lab's own, edited phi1.toml, since removed: the packaged phi1.toml
+    shares only its name, so reading it would analyse another spec. One line naming the manifest,
+    the key and the fix, whether the manifest records no SHA-256 of the spec or the edited file's;
+    nor is a relative path read from where the command runs. With the packaged file's SHA-256 the
+    packaged spec is the one the study ran, and stands in."""
+    import hashlib
+
+    from trustroute.core.packaged import PACKAGED_SPECS
+
+    packaged = PACKAGED_SPECS / "phi1.toml"
+    edited = packaged.read_text() + "# the lab's own edit\n"
+    gone = tmp_path / "lab" / "phi1.toml"
+    shipped = json.loads((REAL_STUDY / MANIFEST_FILE).read_text())["config"]["spec_sha256"]
+    recorded = None if records == "none" else [hashlib.sha256(edited.encode()).hexdigest(), shipped[1]]
+    study = _real_study_naming(tmp_path, str(gone), recorded)
+    with pytest.raises(InputError) as info:
+        load_study(study)
+    said = info.value
+    assert (said.source, said.place) == (str(study / MANIFEST_FILE), "config.specs[0]")
+    assert f"the study's spec {gone} is gone" in said.problem and "not provably" in said.problem
+    assert said.fix.startswith(f"restore {gone}")
+    # a relative path is never read where the command runs, even where a phi1.toml lies
+    monkeypatch.chdir(tmp_path / "study")
+    Path("phi1.toml").write_text(edited)
+    with pytest.raises(InputError, match=r"config\.specs\[0\]"):
+        load_study(_real_study_naming(tmp_path / "relative", "phi1.toml", recorded))
+    # the packaged spec's own SHA-256 recorded: it is the study's spec
+    manifest, episodes, _ = load_study(_real_study_naming(tmp_path / "same", str(gone), shipped))
+    assert set(episodes["spec"]) == {"phi1", "phi2"}

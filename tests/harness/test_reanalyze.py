@@ -167,6 +167,27 @@ def test_a_package_is_checked_against_what_its_manifest_records(study, tmp_path,
     assert out == ""
 
 
+@pytest.mark.parametrize(("key", "value"), [("town", "town01_carla.json"),
+                                            ("specs", ["inputs/../../elsewhere/phi1.toml", "phi2"])])
+def test_an_edited_package_s_manifest_is_named_as_the_package_s_own(key, value, study, tmp_path, capsys):
+    """A package whose manifest's config was edited (its hash and checksums written again over the
+    edit) to name an input outside its inputs/: one line naming the package's own
+    study_manifest.json, the key, and the package's fix, never a manifest.json it does not have nor
+    a study directory's fix."""
+    package = exported(capsys, study, tmp_path / "package")
+    manifest_path = package / "study_manifest.json"
+    manifest = json.loads(manifest_path.read_text())
+    manifest["config"][key] = value
+    manifest["inputs"]["config_sha256"] = config_sha256(manifest["config"])
+    manifest_path.write_text(json.dumps(manifest))
+    resummed(package)
+    code, out, err = run_cli(capsys, "analyze", str(package), "--json")
+    place = "config.town" if key == "town" else "config.specs"
+    assert_one_line_error(code, err, f"{manifest_path}: {place}", "get the package again")
+    assert "manifest.json from the study directory" not in err and f"{package}/manifest.json" not in err
+    assert out == ""
+
+
 def test_out_is_the_report_s_folder_alike_at_the_cli_and_the_api(study, tmp_path, capsys):
     """--out (`out=`) names where the report goes: with --no-report (report=False) nothing is
     written, so a folder in the package is neither used nor refused, at the CLI as at the API; a
