@@ -23,6 +23,8 @@ from click.core import ParameterSource
 from trustroute.app.peers import (
     DEFAULT_MAX_NODES,
     DEFAULT_MAX_STATES,
+    DEFAULT_OUR_TIME_LIMIT,
+    LIMITS,
     ComparedProblem,
     paynt_comparison,
     storm_comparison,
@@ -54,13 +56,18 @@ class PeerProblem:
 
 @dataclass(frozen=True)
 class OurSide:
-    """--depth, --max-nodes and --json: our side of a comparison, and the output."""
+    """--depth, --max-nodes, --our-time-limit and --json: our side of a comparison, and the output."""
 
     depth: int = option("--depth", type=Checked(ranges.DEPTH), default=10, show_default=True,
                         help="Our search depth for the unbounded objective (the horizon when given).")
     max_nodes: int = option(
         "--max-nodes", type=Checked(ranges.PEER_MAX_NODES), default=DEFAULT_MAX_NODES, show_default=True,
         help="Our belief nodes per level; beyond, the least likely are bounded, not expanded.")
+    our_time_limit: float | None = option(
+        "--our-time-limit", type=Checked(ranges.OUR_TIME_LIMIT), default=DEFAULT_OUR_TIME_LIMIT,
+        help="Seconds of our search; past them it stops with sound bounds, wider than its own end's, "
+             "and says so (stopped_by). Default: none: it runs to its end, so its bounds do not "
+             "depend on the machine or its load; give one for a long --horizon.")
     as_json: bool = json_flag()
 
 
@@ -80,7 +87,8 @@ class StormLimits:
         "--exact", is_flag=True,
         help="Instead of the bounds: the trust-free baseline route's value in Storm's exact engine, a "
              "rational, beside our certified value of the route (--horizon defaults to the route's "
-             "junctions; --time-limit, --resolution, --depth and --max-nodes are refused).")
+             "junctions; --time-limit, --resolution, --depth, --max-nodes and --our-time-limit are "
+             "refused).")
 
 
 @dataclass(frozen=True)
@@ -100,9 +108,11 @@ def problem_line(result: dict) -> str:
 
 
 def ours_line(ours: dict) -> str:
-    """Our bounds, gap and seconds, as one line of a comparison's text."""
+    """Our bounds, gap and seconds, as one line of a comparison's text, and the limit that stopped
+    our search, if one did."""
+    stopped = ours.get("stopped_by")
     return (f"  ours   {interval(ours['lower'], ours['upper'])}  gap {ours['gap']:.2e}  "
-            f"{ours['seconds']:.1f} s")
+            f"{ours['seconds']:.1f} s" + (f", stopped by its {stopped}" if stopped in LIMITS else ""))
 
 
 @click.group("peer")
@@ -121,13 +131,13 @@ def storm(spec_path: str, problem: PeerProblem, limits: StormLimits, ours: OurSi
         emit(ours.as_json, found, [] if ours.as_json else storm_exact_lines(found))
         return
     result = storm_comparison(problem.compared(spec_path), limits.time_limit, limits.resolution, ours.depth,
-                              ours.max_nodes, progress=not ours.as_json)
+                              ours.max_nodes, progress=not ours.as_json, our_time_limit=ours.our_time_limit)
     emit(ours.as_json, result, [] if ours.as_json else storm_lines(result))
 
 
 # The options a fixed policy's exact value does not use: given with --exact, each is refused.
 NOT_WITH_EXACT = {"time_limit": "--time-limit", "resolution": "--resolution", "depth": "--depth",
-                  "max_nodes": "--max-nodes"}
+                  "max_nodes": "--max-nodes", "our_time_limit": "--our-time-limit"}
 
 
 def refuse_unused_with_exact() -> None:
@@ -187,7 +197,7 @@ def note_lines(side: dict) -> list[str]:
 def paynt(spec_path: str, problem: PeerProblem, limits: PayntLimits, ours: OurSide) -> None:
     """PAYNT's finite-state controller value (a lower bound of Pr_max) beside ours, for SPEC."""
     result = paynt_comparison(problem.compared(spec_path), limits.time_limit, limits.max_states, ours.depth,
-                              ours.max_nodes, progress=not ours.as_json)
+                              ours.max_nodes, progress=not ours.as_json, our_time_limit=ours.our_time_limit)
     emit(ours.as_json, result, [] if ours.as_json else paynt_lines(result))
 
 

@@ -47,12 +47,20 @@ from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.synthesis.budget import TimeBudget
+from trustroute.policies.work_clock import installed, spend, stopped_by
 from trustroute.policies.work_clock import now as clock_now
-from trustroute.policies.work_clock import spend
 
 
 @dataclass(frozen=True)
 class JointBounds(Bracket):
+    """A search's bounds, its reach (depth, horizon), the nodes it made and cut, its wall-clock
+    seconds, and what ended it (`stopped_by`, work_clock.stopped_by's words): "convergence" (no node
+    with live mass left unexpanded within its reach: the bounds are exact but for rounding), "node
+    cap" (nodes cut beyond `max_nodes` a level or below `prune_below`), "depth cap" (unbounded: live
+    nodes at the depth, valued by the relaxation), or the limit its deadline stood for ("time
+    limit", or "work limit" under a work clock): the deadline left nodes unexpanded or leaves
+    unvalued, so a longer limit could tighten the bounds."""
+
     lower: float
     upper: float
     depth: int
@@ -61,6 +69,7 @@ class JointBounds(Bracket):
     cut_nodes: int
     seconds: float
     belief_rule: str
+    stopped_by: str
 
 
 OPEN_LOOP_STEPS = 30          # junctions of the open-loop continuation at unbounded leaves
@@ -123,15 +132,17 @@ class OpenLoop:
         return out
 
     @staticmethod
-    def charged(values: np.ndarray, steps: int, budget: TimeBudget) -> np.ndarray:
+    def charged(values: np.ndarray, steps: int, budget: TimeBudget) -> tuple[np.ndarray, bool]:
         """`values` (of `values`, computed earlier) as if computed now: chunk by chunk, each chunk
-        spending its work, 0 for the chunks past the deadline. The clock only moves on, so a
-        chunk this uses was valued by `values` too."""
+        spending its work, 0 for the chunks past the deadline; and whether no chunk was. The clock
+        only moves on, so a chunk this uses was valued by `values` too."""
         out = np.zeros(values.size)
+        end = 0
         for part in _chunks_in_time(values.size, budget):
             out[part] = values[part]
             spend(steps * out[part].size)
-        return out
+            end = part.stop
+        return out, end >= values.size
 
 
 def _chunks_in_time(size: int, budget: TimeBudget) -> Iterator[slice]:
@@ -271,7 +282,8 @@ class _Leaves:
     not read the belief (`continuation`; else None) the value of the open-loop continuation
     (never with a guide's nodes, worth what the guide does). Upper: the relaxation's bound from its
     slots (`slot_values`). `valuing`: the clock's seconds the continuation took in the forward
-    pass (`keep`), which the expansion's share does not count."""
+    pass (`keep`), which the expansion's share does not count; `late`: whether the deadline left
+    a leaf without it."""
 
     depth: int
     horizon: int | None
@@ -281,6 +293,7 @@ class _Leaves:
     continuation: OpenLoop | None
     budget: TimeBudget
     valuing: float = 0.0
+    late: bool = False      # a leaf's continuation was left unvalued, past the deadline (`finish`)
 
     @classmethod
     def of(cls, pomdp: TrustPOMDP, spec: Spec, compiled: CompiledSpec, reach: tuple[int, int | None],
@@ -344,8 +357,9 @@ class _Leaves:
         (`part` from `keep`, its bounds handed over)."""
         low, high, leaf, values = part.pop("low"), part.pop("high"), part.pop("leaf"), part.pop("values")
         if leaf.size:
-            charged = OpenLoop.charged(values, self.steps(self.depth - level), self.budget)
+            charged, whole = OpenLoop.charged(values, self.steps(self.depth - level), self.budget)
             low[leaf] = np.maximum(low[leaf], charged)
+            self.late |= not whole
         return low, high
 
 
@@ -394,8 +408,11 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
     expandable = []     # per level: bool per node, expanded with every action
     guided_slot = []    # per level: the guide's action slot per node expanded with it alone, else -1
     cut_total = 0
+    pruned = 0          # open nodes below prune_below, leaves
     n_nodes = 0
     stopped = False     # the expansion's time is up: no further level is expanded
+    late = False        # ... and it left open nodes unexpanded
+    live_at_depth = False
 
     # The expansion gets EXPAND_SHARE of the time, the open-loop values (computed as the levels are
     # made, their work spent in the backward pass) and the backward pass the rest.
@@ -404,9 +421,13 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
         nodes = levels[-1]
         n_nodes += nodes["x"].size
         alive = filter_.masses(nodes["joint"])[2] > 0
-        open_ = alive & (nodes["mass"] >= prune_below) & (level < depth)
+        within = alive & (level < depth)
+        open_ = within & (nodes["mass"] >= prune_below)
+        pruned += int((within & ~open_).sum())
+        live_at_depth = level == depth and bool(alive.any())
         if budget.expired(min(expand_until + leaves.valuing, budget.deadline)):
             stopped = True
+            late = bool(open_.any())
             grow = np.zeros_like(open_)
         else:
             grow = open_ & ~nodes["frozen"] if "frozen" in nodes else open_
@@ -472,6 +493,16 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
     bounds = JointBounds(lower=float(lower[0]), upper=min(1.0, float(upper[0]) + RELAXATION_MARGIN),
                          depth=depth, horizon=horizon,
                          nodes=n_nodes, cut_nodes=cut_total,
-                         seconds=budget.elapsed(), belief_rule=belief_rule)
+                         seconds=budget.elapsed(), belief_rule=belief_rule,
+                         stopped_by=_search_stop(late or leaves.late, cut_total + pruned > 0,
+                                                 horizon is None and live_at_depth))
     return bounds, decisions
+
+
+def _search_stop(late: bool, cut: bool, open_end: bool) -> str:
+    """What ended a search (JointBounds.stopped_by): the limit its deadline stood for when the
+    deadline left a node unexpanded or a leaf unvalued (`late`), else a cap when nodes were `cut`
+    or (unbounded) live nodes were left at the depth (`open_end`), else convergence."""
+    cap = None if late else "node cap" if cut else "depth cap" if open_end else None
+    return stopped_by(not (late or cut or open_end), installed(), cap=cap)
 

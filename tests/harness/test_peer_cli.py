@@ -86,6 +86,40 @@ def test_a_storm_failure_is_one_line_and_exit_2(capsys, monkeypatch):
     assert code == 2 and out == "" and err.count("\n") == 1 and "Storm cannot take" in err
 
 
+@pytest.mark.parametrize("command", ["storm", "paynt"])
+def test_our_time_limit_stops_our_search_with_bounds_that_hold_its_full_ones(capsys, command):
+    """--our-time-limit on a problem our search takes longer for (within 8 junctions, some 16,000
+    nodes, 0.06 s alone): our side stops by it, with bounds holding those of the run without it,
+    and says so in the JSON ("stopped_by") and the text. A limit of 1e-6 s is past before the
+    search checks it first (the relaxation it values leaves by takes a millisecond to build), so
+    where it stops does not hang on the machine's speed or load."""
+    pytest.importorskip("stormpy", reason="needs the optional extra: pip install -e '.[peer]'")
+    if command == "paynt":
+        pytest.importorskip("paynt", reason="needs the optional extra: pip install -e '.[peer]'")
+    args = ("peer", command, "specs/phi1_trust.toml", "--horizon", "8", "--time-limit", "1")
+    code, out, err = run_cli(capsys, *args, "--json")
+    assert code == 0, err
+    full = json.loads(out)["ours"]
+    assert full["stopped_by"] == "convergence" and full["gap"] <= 1e-11
+    code, out, err = run_cli(capsys, *args, "--our-time-limit", "1e-6", "--json")
+    assert code == 0, err
+    limited = json.loads(out)["ours"]
+    assert limited["stopped_by"] == "time limit"
+    assert limited["lower"] <= full["lower"] and limited["upper"] >= full["upper"]
+    assert limited["gap"] > full["gap"] and limited["cut_nodes"] > 0 and limited["nodes"] < full["nodes"]
+    code, out, _ = run_cli(capsys, *args, "--our-time-limit", "1e-6")
+    ours = next(line for line in out.splitlines() if line.startswith("  ours "))
+    assert code == 0 and ours.endswith(", stopped by its time limit"), out
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "nan", "604801", "soon"])
+def test_a_bad_our_time_limit_is_one_line_and_exit_2(capsys, value):
+    """--our-time-limit takes what synth's --time-limit takes, refused in the one wording."""
+    code, out, err = run_cli(capsys, "peer", "storm", "specs/phi1_trust.toml", "--our-time-limit", value)
+    assert code == 2 and out == "" and err.count("\n") == 1 and "Traceback" not in err
+    assert err.startswith("error: --our-time-limit: ") and "or omit --our-time-limit (no limit)" in err
+
+
 @pytest.mark.parametrize(("command", "horizon"), [("storm", "0"), ("paynt", "0"), ("storm", "5000"),
                                                   ("paynt", "1001")])
 def test_the_peers_take_synths_horizons(capsys, command, horizon):
@@ -195,7 +229,7 @@ def test_storm_exact_with_a_horizon_that_cuts_the_route_is_one_line_and_exit_2(c
 
 
 @pytest.mark.parametrize("given", [["--time-limit", "5"], ["--depth", "4", "--max-nodes", "100"],
-                                   ["--resolution", "2"]])
+                                   ["--resolution", "2"], ["--our-time-limit", "5"]])
 def test_storm_exact_refuses_the_options_of_the_bounds_it_would_not_use(capsys, given):
     """An option of the bounds given with --exact (its default too, written out) is one line and
     exit 2 naming it, before any model is built."""

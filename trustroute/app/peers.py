@@ -29,10 +29,16 @@ from trustroute.policies.peer.product_pomdp import (
     route_choices,
 )
 from trustroute.policies.resolve import step_progress
-from trustroute.policies.trust_state_synthesis.search import JointLimits, joint_bounds
+from trustroute.policies.synthesis.budget import TimeBudget
+from trustroute.policies.trust_state_synthesis.search import JointBounds, JointLimits, joint_search
+from trustroute.policies.work_clock import LIMITS as LIMITS
 
 # The defaults the CLI offers, from the definitions the solvers use.
 DEFAULT_MAX_NODES = JointLimits.max_nodes
+# Our side's time limit by default: none, so that our search runs to its end and its bounds do
+# not depend on the machine or its load; given, the search stops by it with sound, wider bounds
+# and says so ("stopped_by" one of LIMITS).
+DEFAULT_OUR_TIME_LIMIT: float | None = None
 DEFAULT_MAX_STATES = MAX_PRODUCT_STATES
 
 
@@ -60,15 +66,22 @@ def loaded_problem(problem: ComparedProblem) -> tuple:
     return inputs.spec, build_pomdp(inputs.town, inputs.model)
 
 
-def our_bounds(pomdp, spec, horizon: int | None, depth: int, max_nodes: int):
-    """Our side of a comparison: the trust-state search's bounds on the same problem."""
-    return joint_bounds(pomdp, spec, depth=depth, horizon=horizon, max_nodes=max_nodes)
+def our_bounds(pomdp, spec, horizon: int | None, depth: int, max_nodes: int,
+               time_limit: float | None = DEFAULT_OUR_TIME_LIMIT) -> JointBounds:
+    """Our side of a comparison: the trust-state search's bounds on the same problem, within
+    `time_limit` seconds when given (a deadline on the synthesis clock, as a synthesis' time limit
+    is: policies/work_clock.py; past it the search stops with sound bounds, `stopped_by` naming the
+    limit), else to the search's end."""
+    deadline = None if time_limit is None else TimeBudget.start(time_limit).deadline
+    limits = JointLimits(max_nodes=max_nodes, deadline=deadline)
+    return joint_search(pomdp, spec, depth, horizon, limits=limits)[0]
 
 
 def _both_sides(problem: ComparedProblem, peer: str, run_peer: Callable[[ExplicitProduct], Any], depth: int,
-                max_nodes: int, progress: bool) -> tuple[dict, Any, Any]:
+                max_nodes: int, progress: bool, our_time_limit: float | None) -> tuple[dict, Any, Any]:
     """(the problem's JSON fields, the peer's result, ours): the product exported, `run_peer` on it
-    and our search, each step named by the progress lines of `trustroute peer <peer>`."""
+    and our search (within `our_time_limit` seconds, `our_bounds`), each step named by the progress
+    lines of `trustroute peer <peer>`."""
     spec, pomdp = loaded_problem(problem)
     with step_progress(f"peer {peer.lower()}", progress) as step:
         step("exporting the product POMDP")
@@ -76,32 +89,35 @@ def _both_sides(problem: ComparedProblem, peer: str, run_peer: Callable[[Explici
         step(f"{peer} on {product.n_states:,} product states")
         theirs = run_peer(product)
         step("our search")
-        ours = our_bounds(pomdp, spec, problem.horizon, depth, max_nodes)
+        ours = our_bounds(pomdp, spec, problem.horizon, depth, max_nodes, our_time_limit)
     fields = {"spec": spec.name, "file": spec.source_path, "horizon": problem.horizon,
               "product_states": product.n_states}
     return fields, theirs, ours
 
 
 def storm_comparison(problem: ComparedProblem, time_limit: float, resolution: int, depth: int,
-                     max_nodes: int, progress: bool = False) -> dict:
-    """Both sides' bounds and seconds, JSON-ready."""
+                     max_nodes: int, progress: bool = False,
+                     our_time_limit: float | None = DEFAULT_OUR_TIME_LIMIT) -> dict:
+    """Both sides' bounds and seconds, JSON-ready (`our_time_limit`: our search's, `our_bounds`)."""
     from trustroute.policies.peer.storm import require_storm, run_storm
 
     require_storm("trustroute peer storm")
     fields, storm, ours = _both_sides(
         problem, "Storm", lambda product: run_storm(product, time_limit=time_limit, resolution=resolution),
-        depth, max_nodes, progress)
+        depth, max_nodes, progress, our_time_limit)
     return {**fields, "storm": storm.to_dict(), "ours": ours.to_dict(),
             "overlap": bool(max(storm.lower, ours.lower) <= min(storm.upper, ours.upper) + 1e-9)}
 
 
 def paynt_comparison(problem: ComparedProblem, time_limit: float, max_states: int, depth: int,
-                     max_nodes: int, progress: bool = False) -> dict:
-    """PAYNT's controller value beside our bounds, JSON-ready."""
+                     max_nodes: int, progress: bool = False,
+                     our_time_limit: float | None = DEFAULT_OUR_TIME_LIMIT) -> dict:
+    """PAYNT's controller value beside our bounds, JSON-ready (`our_time_limit`: our search's,
+    `our_bounds`)."""
     require_paynt("trustroute peer paynt")
     fields, paynt, ours = _both_sides(
         problem, "PAYNT", lambda product: run_paynt(product, time_limit=time_limit, max_states=max_states),
-        depth, max_nodes, progress)
+        depth, max_nodes, progress, our_time_limit)
     return {**fields, "paynt": paynt.to_dict(), "ours": ours.to_dict(),
             "within_ours": bool(paynt.lower <= ours.upper + paynt.precision)}
 

@@ -196,5 +196,8 @@ DEPTH = _natural("--depth", "junctions", "--depth 10")
 PEER_MAX_NODES = _positive("--max-nodes", "belief nodes per level", "--max-nodes 200000")
 PEER_TIME_LIMIT = OptionRange("--time-limit", Number(minimum=1.0),
                               "pass a finite number of seconds >= 1, e.g. --time-limit 30")
+# our search's seconds: any a synthesis takes (TIME_LIMIT's), or omitted for none
+OUR_TIME_LIMIT = OptionRange("--our-time-limit", TIME_LIMIT.kind,
+                             f"{TIME_LIMIT.fix}, or omit --our-time-limit (no limit)")
 RESOLUTION = _positive("--resolution", "steps", "--resolution 2")
 MAX_STATES = _positive("--max-states", "states", "--max-states 200000")

@@ -52,13 +52,19 @@ def test_without_trust_atoms_the_search_equals_the_belief_only_exact_search(pomd
 
 
 def test_a_search_cut_to_few_nodes_still_brackets_the_exact_value(pomdp):
-    """φ1 with the trust atom: cut nodes get the open-loop lower bound and the relaxation's upper."""
+    """φ1 with the trust atom: cut nodes get the open-loop lower bound and the relaxation's upper.
+    Each search names what ended it (`stopped_by`): the complete one convergence, the cut one its
+    node cap (by max_nodes or prune_below), the unbounded one the depth that left live nodes."""
     spec = load_spec("specs/phi1_trust.toml", pomdp.town)
     exact = joint_bounds(pomdp, spec, depth=0, horizon=8)
     cut = joint_bounds(pomdp, spec, depth=0, horizon=8, max_nodes=50)
     assert cut.cut_nodes > 0 and exact.cut_nodes == 0
     assert cut.lower - TOLERANCE <= exact.lower <= cut.upper + TOLERANCE
     assert cut.nodes < exact.nodes / 10
+    pruned = joint_bounds(pomdp, spec, depth=0, horizon=8, prune_below=0.01)
+    assert pruned.cut_nodes == 0 and pruned.gap > exact.gap
+    assert (exact.stopped_by, cut.stopped_by, pruned.stopped_by) == ("convergence", "node cap", "node cap")
+    assert joint_bounds(pomdp, spec, depth=4).stopped_by == "depth cap"
 
 
 def test_with_a_guide_the_cut_search_lower_bound_is_the_value_of_the_policy_it_returns(pomdp):
