@@ -24,7 +24,11 @@ Where workers are spawned, the task function (with the study's context) is sent 
 own pipe once it runs, not as the process's arguments: CPython writes those to the new process
 while it keeps the pipe's reading end open itself, so a worker that exits before reading them all
 (they exceed a pipe's buffer) would block the parent for ever. Forked workers inherit the
-function, and nothing is sent.
+function, and nothing is sent. A pool starts all its workers before it hands any of them the
+function: a send waits until its worker has imported what it needs (seconds) and read it, so
+workers started one after the other's send would import one after the other. A worker that dies is
+replaced at the pool's next round, once every death seen with it is counted (workers of an unguarded
+script die together: the pool stops without spawning more), and only if a task waits for it.
 """
 
 from __future__ import annotations
@@ -153,16 +157,22 @@ class _Worker(Generic[Task]):
         self.process = context.Process(target=_worker_main, args=arguments, daemon=True)
         self.process.start()
         child.close()
-        if not forked:
-            try:
-                with contextlib.suppress(OSError):   # it exited already: its pipe's end is seen closed
-                    self.connection.send(function)
-            except BaseException:   # a Ctrl-C while it is handed the function: no pool holds it yet
-                self.process.kill()
-                self.process.join()
-                raise
+        self.unsent = None if forked else function   # what `hand` sends
         self.task: Task | None = None
         self.ready = False
+
+    def hand(self) -> None:
+        """Send a spawned worker its task function (the module's docstring); a forked one has it."""
+        function, self.unsent = self.unsent, None
+        if function is None:
+            return
+        try:
+            with contextlib.suppress(OSError):   # it exited already: its pipe's end is seen closed
+                self.connection.send(function)
+        except BaseException:   # a Ctrl-C mid-send: the pipe holds part of a message, so it is killed
+            self.process.kill()
+            self.process.join()
+            raise
 
     def stop(self) -> None:
         with contextlib.suppress(OSError, ValueError):
@@ -178,14 +188,18 @@ def process_pool(
     A task whose worker died yields `died(task, reason)` instead (e.g. a failed outcome)."""
     context = multiprocessing.get_context()
     pending = deque(tasks)
+    size = min(workers, len(tasks))
     pool: list[_Worker[Task]] = []
     start_failures: list[int | None] = []   # exit codes of workers ended before they were ready, in a row
     try:
-        # started inside the try: a Ctrl-C while a spawned worker is handed the function shuts
-        # down the ones already started
-        for _ in range(min(workers, len(tasks))):
-            pool.append(_Worker(context, function))
         while pending or any(w.task is not None for w in pool):
+            # started inside the try, each into the pool at once: a Ctrl-C while workers start or
+            # are handed the function shuts down those already started
+            fresh = len(pool)
+            while len(pool) < size and len(pending) > sum(w.task is None for w in pool):
+                pool.append(_Worker(context, function))
+            for worker in pool[fresh:]:
+                worker.hand()
             for worker in pool:
                 if worker.task is None and pending:
                     worker.task = pending.popleft()
@@ -206,8 +220,7 @@ def process_pool(
                     start_failures = [] if worker.ready else [*start_failures, worker.process.exitcode]
                     if len(start_failures) >= START_FAILURES:
                         raise WorkersCannotStart(start_failures) from None
-                    worker.task = None
-                    pool[pool.index(worker)] = _Worker(context, function)
+                    pool.remove(worker)   # replaced at the loop's top if a task waits for it
                     worker.connection.close()
                     yield died(task, reason)
                     continue

@@ -73,15 +73,27 @@ def test_one_worker_exiting_while_it_starts_fails_only_its_task(monkeypatch, tmp
 
 @pytest.mark.parametrize("method", ["spawn", "forkserver"])
 def test_workers_that_are_not_forked_run_their_tasks(monkeypatch, method):
-    """A spawned worker's parent is the study's process; a forkserver's is the fork server."""
+    """A spawned worker's parent is the study's process; a forkserver's is the fork server. Both
+    workers are started before either is handed the function, so they import at the same time."""
     import multiprocessing
+    import multiprocessing.connection
 
     from trustroute.harness.study import workers
 
     context = multiprocessing.get_context(method)
     monkeypatch.setattr(workers.multiprocessing, "get_context", lambda: context)
+    send, started_at_handing = multiprocessing.connection.Connection.send, []
+
+    def counted(connection, message) -> None:
+        if callable(message):   # the task function, handed to a worker
+            started_at_handing.append(len(multiprocessing.active_children()))
+        send(connection, message)
+
+    monkeypatch.setattr(multiprocessing.connection.Connection, "send", counted)
+    before = len(multiprocessing.active_children())
     results = list(workers.process_pool(abs, [-1, -2, -3], 2, lambda task, reason: (task, reason)))
     assert sorted(results) == [1, 2, 3]
+    assert [n - before for n in started_at_handing] == [2, 2], started_at_handing
 
 
 def test_ctrl_c_while_workers_start_stops_those_started(monkeypatch):
@@ -117,8 +129,9 @@ def test_ctrl_c_while_a_spawned_worker_is_handed_its_function_stops_it(monkeypat
 
     monkeypatch.setattr(multiprocessing.connection.Connection, "send", interrupted)
     before = set(multiprocessing.active_children())
+    worker = workers._Worker(multiprocessing.get_context("spawn"), abs)
     with pytest.raises(KeyboardInterrupt):
-        workers._Worker(multiprocessing.get_context("spawn"), abs)
+        worker.hand()
     assert set(multiprocessing.active_children()) <= before
 
 
@@ -150,6 +163,9 @@ def test_a_worker_that_became_ready_breaks_the_row_of_workers_exiting_while_they
             made.append(self)
             if len(made) == 1:
                 self.other.close()   # exits before it is ready
+
+        def hand(self) -> None:
+            pass
 
         def stop(self) -> None:
             self.connection.close()
