@@ -18,6 +18,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from tests.cli import run_cli
 from trustroute.core.dataset import part_path
 from trustroute.core.errors import InputError
 from trustroute.harness.study import runner as runner_module
@@ -73,7 +74,10 @@ def _assert_complete(study_dir: Path, config) -> None:
 
 
 @pytest.mark.slow
-def test_sigkill_mid_run_then_rerun_equals_uninterrupted(tmp_path):
+def test_sigkill_mid_run_then_rerun_equals_uninterrupted(tmp_path, capsys):
+    """The study killed is the real command in its own process (its process group killed as a
+    terminal's would be); the rerun is the same command in this process (tests/cli.py), which
+    reads what the killed run left as a new process would, without a second interpreter's start."""
     config_path = _config_file(tmp_path, participants=200)
     config = load_study_config(config_path)
     killed = tmp_path / "killed"
@@ -108,9 +112,9 @@ def test_sigkill_mid_run_then_rerun_equals_uninterrupted(tmp_path):
     assert 0 < done_before < 400
     assert not (killed / "episodes.parquet").exists()
 
-    rerun = subprocess.run(command, cwd=REPO, capture_output=True, text=True, timeout=300)
-    assert rerun.returncode == 0, rerun.stderr
-    assert f"{done_before} already done" in rerun.stdout
+    code, out, err = run_cli(capsys, *command[3:])
+    assert code == 0, err
+    assert f"{done_before} already done" in out
     reference = tmp_path / "reference"
     _run(config, reference, workers=2)
     _assert_complete(killed, config)
