@@ -6,7 +6,7 @@ pool instead gives each worker one task at a time over its own pipe, so the pare
 which task a worker was running:
 
 - a worker that dies (killed, out of memory, a crash in native code) fails only the task it was
-  running, with the reason (signal or exit code); a fresh worker takes its place;
+  running, with the reason (signal or exit code); a fresh worker takes its place while tasks wait;
 - workers die with their parent: `prctl(PR_SET_PDEATHSIG, SIGKILL)` on Linux, and a watchdog
   thread that polls the parent pid wherever prctl is unavailable (and for the moment between
   fork and prctl); a forkserver's workers die with the fork server, which ends with the parent;
