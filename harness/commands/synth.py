@@ -383,44 +383,46 @@ def evaluate(spec_path: str, policy_name: str, options: EvaluateOptions) -> None
     problem = load_problem(spec_path, options.town_path, options.driver_path, options.population_path)
     making = PolicySettings(cache_dir=options.cache_dir, progress=not (options.as_json or options.quiet))
     value = evaluate_problem(problem, lambda: policy_for(problem, policy_name, making), settings)
-    payload, lines = _evaluation_output(problem, value)
-    _mark_fallback_only(payload, f"policy {policy_name}", value.fallback_only)
+    payload, lines = _evaluation_output(problem, value, f"policy {policy_name}")
     emit(options.as_json, payload, lines)
 
 
-def _evaluation_output(problem, value) -> tuple[dict, list[str]]:
-    """`evaluate`'s JSON and text of `value` (an EvaluationOutcome): with its per-type values
-    (`type_values`, a population's) the value over the mixture and per type, else the episode ends
-    and what pruning cut."""
+def _evaluation_output(problem, value, what: str) -> tuple[dict, list[str]]:
+    """`evaluate`'s JSON and text of `value` (an EvaluationOutcome of the policy `what`): the JSON is
+    its `to_dict()` with the per-type values (`type_values`, a population's) moved under
+    "population" and the fallback it only is marked (`_mark_fallback_only`); the text gives the
+    value over the mixture and per type, else the episode ends and what pruning cut."""
     spec = problem.given_spec
     payload = value.to_dict()
+    types, fallback = payload.pop("type_values", None), payload.pop("fallback_only", None)
     payload["spec"] = spec.name
     payload["expected_final_trust"] = finite_or_none(value.expected_final_trust)
     payload["expected_junctions"] = finite_or_none(value.expected_junctions)
-    types = value.type_values
     if types is not None:
         population = problem.population
         payload["population"] = {"file": population.source_path, "content_hash": population.content_hash,
-                                 "type_values": [t.to_dict() for t in types]}
-        return payload, [
+                                 "type_values": types}
+        lines = [
             f"{spec.name} / {value.policy} over the population's {population.n_types} driver types: "
             f"P(satisfied) in {interval(value.lower, value.upper)}, E[final trust] = "
             f"{value.expected_final_trust:.4f}",
-            "per type: " + "; ".join(type_value_text(t) for t in types)]
-    lines = [
-        f"{spec.name} / {value.policy}: P(satisfied) in {interval(value.lower, value.upper)}, "
-        f"E[final trust] = {value.expected_final_trust:.4f}, E[junctions] = "
-        f"{value.expected_junctions:.2f}, P(fallback fired) = {value.fallback_probability:.4f}",
-        "episode ends: " + ", ".join(f"{k} {v:.4f}" for k, v in value.end_mass.items())]
-    if value.pruning is not None:
-        lines.append(_pruning_line(value))
+            "per type: " + "; ".join(type_value_text(t) for t in value.type_values)]
+    else:
+        lines = [
+            f"{spec.name} / {value.policy}: P(satisfied) in {interval(value.lower, value.upper)}, "
+            f"E[final trust] = {value.expected_final_trust:.4f}, E[junctions] = "
+            f"{value.expected_junctions:.2f}, P(fallback fired) = {value.fallback_probability:.4f}",
+            "episode ends: " + ", ".join(f"{k} {v:.4f}" for k, v in value.end_mass.items())]
+        if value.pruning is not None:
+            lines.append(_pruning_line(value))
+    _mark_fallback_only(payload, what, fallback)
     return payload, lines
 
 
 def _mark_fallback_only(payload: dict, what: str, fallback: str | None) -> None:
-    """A synthesized policy that is only its fallback (`fallback`: what drives, in words; None
-    otherwise): one line on stderr and `"fallback_only": true` in the JSON (the key only then, so
-    the output of every other policy is unchanged)."""
+    """A synthesized policy that is only its fallback (`fallback`: what drives, in words, as the
+    evaluation's `to_dict()` gives it; None otherwise): one line on stderr and `"fallback_only":
+    true` in the JSON (the key only then, so the output of every other policy is unchanged)."""
     if fallback is not None:
         click.echo(f"warning: {what} has no synthesized decision (0 rows): it is only its fallback, "
                    f"{fallback}; the values below are the fallback's", err=True)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import json
 
 import pytest
 
@@ -163,6 +164,18 @@ def test_a_population_evaluation_gives_each_type_alike_through_the_api_and_the_c
     assert [t.to_dict() for t in api.type_values] == cli_value["population"]["type_values"]
     assert (cli_value["lower"], cli_value["upper"]) == (api.lower, api.upper)
     assert trustroute.evaluate(spec).type_values is None
+
+
+def test_a_serialised_population_evaluation_keeps_each_type_s_value(capsys):
+    """`to_dict()` of the API's evaluation, as JSON, holds the per-type values the CLI's --json
+    gives under `population.type_values` (the CLI builds its JSON from that one dict); without a
+    population it has no such key."""
+    api = trustroute.evaluate("phi1", population="driver_population_three_types")
+    cli_value = cli_json(capsys, "evaluate", "phi1", "free", "--population", "driver_population_three_types")
+    serialised = json.loads(json.dumps(api.to_dict()))
+    assert serialised["type_values"] == cli_value["population"]["type_values"]
+    assert [t["name"] for t in serialised["type_values"]] == ["builder", "flat", "wary"]
+    assert "type_values" not in cli_value and "type_values" not in trustroute.evaluate("phi1").to_dict()
 
 
 @pytest.mark.slow

@@ -69,6 +69,22 @@ def test_the_api_evaluation_says_what_drives_when_the_policy_is_only_its_fallbac
     assert trustroute.evaluate("phi1", "free").fallback_only is None
 
 
+def test_a_serialised_api_evaluation_says_what_drives_when_the_policy_is_only_its_fallback(tmp_path,
+                                                                                           capsys):
+    """`trustroute.evaluate(...).to_dict()` keeps `fallback_only`, the text the CLI warns of, which
+    the CLI's --json gives as `"fallback_only": true`; a policy with rows has no such key."""
+    import trustroute
+
+    out = tmp_path / "h1.json"
+    only = trustroute.synthesize("phi1", horizon=1, out=out)
+    serialised = json.loads(json.dumps(trustroute.evaluate("phi1", out).to_dict()))
+    code, stdout, err = run_cli(capsys, "evaluate", "phi1", str(out), "--json")
+    assert code == 0 and json.loads(stdout)["fallback_only"] is True
+    assert serialised["fallback_only"] == only.fallback_only is not None
+    assert f"only its fallback, {serialised['fallback_only']};" in err
+    assert "fallback_only" not in trustroute.evaluate("phi1", "free").to_dict()
+
+
 @pytest.mark.slow
 def test_a_robust_synthesis_without_rows_says_so(tmp_path, capsys):
     code, stdout, err = run_cli(capsys, "synth", "phi1", "--horizon", "3", "--population",

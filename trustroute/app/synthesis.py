@@ -217,7 +217,9 @@ class EvaluationOutcome(Evaluation):
     fallback_only: what drives everywhere, in words, when the policy is a synthesized one with no
         decision row (`fallback_only`), so that its values are the fallback's; None otherwise, as
         `SynthesisResult.fallback_only`.
-    `to_dict()` is the Evaluation's: each door places these two as it reports them."""
+    `to_dict()` is the Evaluation's with each of these two that is not None after it: `type_values`
+    as a list of `TypeValue.to_dict()`, `fallback_only` as its text (`trustroute evaluate` reshapes
+    them for its JSON: harness/commands/synth.py, `_evaluation_output`)."""
 
     type_values: tuple[TypeValue, ...] | None = None
     fallback_only: str | None = None
@@ -230,7 +232,11 @@ class EvaluationOutcome(Evaluation):
 
     def to_dict(self) -> dict:
         out = super().to_dict()
-        del out["type_values"], out["fallback_only"]
+        del out["type_values"], out["fallback_only"]   # asdict's, placed below as they serialise
+        if self.type_values is not None:
+            out["type_values"] = [t.to_dict() for t in self.type_values]
+        if self.fallback_only is not None:
+            out["fallback_only"] = self.fallback_only
         return out
 
 
