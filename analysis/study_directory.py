@@ -27,7 +27,13 @@ from trustroute.core.dataset import (
 from trustroute.core.errors import InputError
 from trustroute.core.package import PACKAGE_TABLE_FIX, is_package, tables_folder, verify_package
 from trustroute.harness.study.context import load_study_inputs
-from trustroute.harness.study.inputs import manifest_wording, relocated_config, spec_paths, verify_inputs
+from trustroute.harness.study.inputs import (
+    manifest_wording,
+    not_stored_nor_absolute,
+    relocated_config,
+    spec_paths,
+    verify_inputs,
+)
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
@@ -82,7 +88,7 @@ def study_inputs(manifest: dict, study_dir: Path):
     shown, fix = str(Path(study_dir) / said.manifest), said.config_fix
     town = _recorded_input(config.get("town"), "town", shown, fix)
     driver = _recorded_input(config.get("driver_model"), "driver model", shown, fix)
-    specs = spec_paths(config, study_dir)
+    specs = spec_paths(manifest, study_dir)
     keyed = [("config.town", town), ("config.driver_model", driver),
              *((f"config.specs[{i}]", str(p)) for i, p in enumerate(specs))]
     try:
@@ -102,8 +108,7 @@ def _recorded_input(path: str | None, what: str, shown: str, fix: str) -> str | 
     runs), or when it is gone (no option of a command can stand in)."""
     key = f"config.{what.replace(' ', '_')}"
     if path is not None and not Path(path).is_absolute():
-        raise InputError(shown, key, f"the study's {what} {path!r} is neither one of its stored inputs "
-                         "(inputs/...) nor an absolute path", fix)
+        raise InputError(shown, key, not_stored_nor_absolute(what, path), fix)
     if path is not None and not Path(path).is_file():
         raise InputError(shown, key,
                          f"the study's {what} {path} is gone, and this study directory holds no copy of "

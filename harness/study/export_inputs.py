@@ -42,13 +42,18 @@ from trustroute.core.output_files import atomic_write_bytes
 from trustroute.core.packaged import SPECS, PackagedKind
 from trustroute.core.wording import counted
 from trustroute.harness.live.auth import TOKEN_BYTES
-from trustroute.harness.study.inputs import INPUTS_DIR, POLICIES_DIR, Record, content_folder, task_files
+from trustroute.harness.study.inputs import (
+    INPUTS_DIR,
+    PATH_LEFT_OUT,
+    POLICIES_DIR,
+    Record,
+    content_folder,
+    task_files,
+)
 from trustroute.networks.town import TOWNS
 from trustroute.participants.driver_model import DRIVER_MODELS
 from trustroute.policies.routing.files import ZIP_MAGIC
 
-# what an absolute path naming nothing the package holds becomes in a copied file
-PATH_LEFT_OUT = "<a path on the lab's disk, left out>"
 # an absolute path: POSIX of two segments or more (not part of a URL, a fraction or a unit such as
 # m/s), a file: URL, a Windows drive or network path, a path under a home folder (~/, ~name/)
 ABSOLUTE_PATH = re.compile(
@@ -194,14 +199,14 @@ def within(study_dir: Path, relative: str) -> Path | None:
     return path if path.resolve().is_relative_to(inputs) and path.is_file() else None
 
 
-def shipped_task(config: dict, packaged: PackagedInputs, study_dir: Path) -> dict[str, Path]:
-    """Fill `packaged` with the task files of a study that stored no copy of its inputs (`config`:
-    its manifest's), as the installed package ships them, each under the package's inputs/ as a
+def shipped_task(manifest: dict, packaged: PackagedInputs, study_dir: Path) -> dict[str, Path]:
+    """Fill `packaged` with the task files of a study that stored no copy of its inputs (`manifest`:
+    its manifest), as the installed package ships them, each under the package's inputs/ as a
     study stores it; relative path -> the file to copy. A file the package does not ship is left
     out, under its config place, and its config value is kept. `study_dir`: the study, which an
     error names (`task_files`)."""
-    packaged.shipped, sources = True, {}
-    for key, paths in task_files(config, study_dir).items():
+    config, packaged.shipped, sources = manifest.get("config") or {}, True, {}
+    for key, paths in task_files(manifest, study_dir).items():
         values, many = [], isinstance(config.get(key), list)
         for index, path in enumerate(paths):
             if not TASK_KINDS[key].ships(path):
@@ -236,7 +241,7 @@ def export_inputs(study_dir: Path, manifest: dict, out: Path, key: dict[int, int
     pseudonyms, `registry`: the words of a live study's registry no file may hold (`identifying_names`)."""
     config, packaged = manifest.get("config") or {}, PackagedInputs()
     if manifest.get("inputs") is None:
-        sources: dict[str, Path | None] = {**shipped_task(config, packaged, study_dir)}
+        sources: dict[str, Path | None] = {**shipped_task(manifest, packaged, study_dir)}
     else:
         packaged.record = manifest["inputs"].get("files", {})
         sources = {relative: within(study_dir, relative) for relative in packaged.record}

@@ -26,10 +26,11 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from trustroute.core.dataset import MANIFEST_FILE
+from trustroute.core.dataset import CARLA_LOGS_ENGINE, MANIFEST_FILE
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_bytes
 from trustroute.core.package import PACKAGE_MANIFEST_FILE, SUMS_FILE, TAMPERED_FIX, is_package, sha256_of
@@ -52,9 +53,13 @@ INPUTS_DIR = "inputs"
 POLICIES_DIR = f"{INPUTS_DIR}/policies"
 MANIFEST_FIX = f"restore {MANIFEST_FILE} from the study directory's original copy"
 # A config key of a study that stores no copy of its inputs (`trustroute import carla-logs` writes
-# it): the SHA-256 of each of its specs, in the order of `specs`, by which `spec_paths` knows the
-# packaged spec of a file name for the one the study read when its recorded path is gone.
+# it): the SHA-256 of each of its specs, in the order of `specs`, by which `found_spec` knows a file
+# for the one the study read, at its recorded path or, that path gone, the packaged spec of its name.
 SPEC_SHA256 = "spec_sha256"
+SHA256_HEX = re.compile(r"[0-9a-f]{64}")   # a SHA-256 as `sha256_of` writes it
+# What the export (export_inputs.py) writes, in a package's config and copied files, in place of an
+# absolute path naming nothing the package holds: a spec so named is one the package does not hold.
+PATH_LEFT_OUT = "<a path on the lab's disk, left out>"
 
 
 # What a study directory holds of its inputs: relative path -> {"sha256": ..., "source": ...}.
@@ -167,15 +172,18 @@ def store_inputs(study_dir: Path, context: StudyContext) -> tuple[dict, dict]:
 
 
 def found_spec(config: dict, index: int) -> Path | None:
-    """The spec file `config.specs[index]` of a manifest's config (as `relocated_config` gives it):
-    at its recorded absolute path (a relative one is never read from where the command runs), or,
-    that path gone (a study that stores no copy of its inputs, moved to another machine), the
-    packaged spec of its file name when it is provably the same spec: the config records the spec's
-    SHA-256 (`SPEC_SHA256`) and the packaged file has it. None otherwise: a packaged spec of the
-    same name may not be the one the study ran (a user's edited file of that name)."""
+    """The spec file `config.specs[index]` of a manifest's config (as `relocated_config` gives it,
+    its `SPEC_SHA256` checked by `spec_paths`): at its recorded absolute path (a relative one is
+    never read from where the command runs), or that path gone or changed (a study that stores no
+    copy of its inputs, moved to another machine), the packaged spec of its file name. A file is
+    read only when it is provably the spec the study ran: where the config records the spec's
+    SHA-256 the file has it, and the packaged spec stands in only then; with no SHA-256 recorded,
+    the file at the recorded path is the study's own. None otherwise: a file edited since, or a
+    packaged spec that merely shares its name (a user's edited file of that name), is not it."""
     recorded, digest = Path(config["specs"][index]), _recorded_spec_sha256(config, index)
     packaged = PACKAGED_SPECS / recorded.name
-    if recorded.is_absolute() and recorded.exists():
+    if recorded.is_absolute() and recorded.exists() and (
+            digest is None or (recorded.is_file() and sha256_of(recorded) == digest)):
         return recorded
     if digest is not None and packaged.is_file() and sha256_of(packaged) == digest:
         return packaged
@@ -187,39 +195,99 @@ def _recorded_spec_sha256(config: dict, index: int) -> str | None:
     return hashes[index] if index < len(hashes) else None
 
 
-def spec_paths(config: dict, study_dir: Path) -> list[Path]:
-    """Every spec file of a manifest's config, each as `found_spec` finds it, of the study directory
-    or package `study_dir`; a spec it finds none for is an InputError naming the manifest,
-    `config.specs[i]` and the fix."""
+def _check_spec_sha256(config: dict, study_dir: Path, fix: str) -> None:
+    """The config's `SPEC_SHA256` is absent, null or a list of SHA-256 digests (64 lowercase hex
+    characters, or null for a spec with none), or InputError naming the manifest and the key."""
+    value = config.get(SPEC_SHA256)
+    if value is None:
+        return
+    if not isinstance(value, list):
+        wrong = f"it is {json.dumps(value)[:72]}"
+    else:
+        bad = [i for i, d in enumerate(value)
+               if d is not None and not (isinstance(d, str) and SHA256_HEX.fullmatch(d))]
+        if not bad:
+            return
+        wrong = f"its entry [{bad[0]}] is {json.dumps(value[bad[0]])[:72]}"
+    shown = str(Path(study_dir) / manifest_wording(study_dir).manifest)
+    raise InputError(shown, f"config.{SPEC_SHA256}", "not a list of the specs' SHA-256 (each 64 lowercase "
+                     f"hex characters, or null), in the order of config.specs: {wrong}", fix)
+
+
+def spec_paths(manifest: dict, study_dir: Path) -> list[Path]:
+    """Every spec file of a manifest's config (`manifest`: as `load_study` gives it, its config as
+    `relocated_config` gives it), each as `found_spec` finds it, of the study directory or package
+    `study_dir`; a config's malformed `SPEC_SHA256`, checked before any spec is looked for, or a spec
+    it finds none for, is an InputError naming the manifest, the key and the fix."""
+    config = manifest.get("config") or {}
+    _check_spec_sha256(config, study_dir, _spec_fix(manifest, study_dir))
     paths = []
-    for index, value in enumerate(config.get("specs") or []):
+    for index in range(len(config.get("specs") or [])):
         path = found_spec(config, index)
         if path is None:
-            raise _gone_spec(study_dir, config, index, value)
+            raise _unfound_spec(manifest, study_dir, index)
         paths.append(path)
     return paths
 
 
-def _gone_spec(study_dir: Path, config: dict, index: int, value: str) -> InputError:
-    """The error of `spec_paths` for the spec `value`, `config.specs[index]`, that is gone."""
+def not_stored_nor_absolute(what: str, value: str) -> str:
+    """The problem of a config's input path that is never read: relative, yet not under inputs/
+    (read from where the command runs, it could be any file)."""
+    return (f"the study's {what} {value!r} is neither one of its stored inputs (inputs/...) nor an "
+            "absolute path")
+
+
+def _unfound_spec(manifest: dict, study_dir: Path, index: int) -> InputError:
+    """The error of `spec_paths` for `config.specs[index]`, which `found_spec` finds no file for."""
+    config = manifest["config"]
+    value, digest = config["specs"][index], _recorded_spec_sha256(config, index)
+    recorded, packaged = Path(value), PACKAGED_SPECS / Path(value).name
     said = manifest_wording(study_dir)
-    why = ("" if not (PACKAGED_SPECS / Path(value).name).is_file() else
-           f", and the packaged {Path(value).name} is not provably the spec the study ran ("
-           + ("the manifest records no SHA-256 of it" if _recorded_spec_sha256(config, index) is None
-              else f"its SHA-256 differs from the manifest's config.{SPEC_SHA256}[{index}]") + ")")
-    fix = (said.config_fix if said is _PACKAGE_WORDING else
-           f"restore {value} (the spec the study was run with), or analyse the study where it was made")
-    return InputError(str(Path(study_dir) / said.manifest), f"config.specs[{index}]",
-                      f"the study's spec {value} is gone{why}", fix)
+    differs = f"its SHA-256 differs from config.{SPEC_SHA256}[{index}]"
+    if value == PATH_LEFT_OUT:
+        problem = "the export left out this spec of the study (a file on the lab's disk), so the package "
+        problem += "cannot be analysed again without it"
+        fix = ("ask the study's authors for the spec, or analyse the study directory the package was "
+               "exported from")
+        return InputError(str(Path(study_dir) / said.manifest), f"config.specs[{index}]", problem, fix)
+    if not recorded.is_absolute():
+        problem = not_stored_nor_absolute("spec", value)
+    elif recorded.exists():
+        problem = f"the study's spec {value} changed since the study was run ({differs})"
+    else:
+        problem = f"the study's spec {value} is gone"
+    if packaged.is_file() and packaged != recorded:
+        problem += (f", and the packaged {packaged.name} is not provably the spec the study ran (" +
+                    ("the manifest records no SHA-256 of it" if digest is None else differs) + ")")
+    return InputError(str(Path(study_dir) / said.manifest), f"config.specs[{index}]", problem,
+                      _spec_fix(manifest, study_dir, value if recorded.is_absolute() else None))
 
 
-def task_files(config: dict, study_dir: Path) -> dict[str, list[Path]]:
-    """The files that define the task of the study in `study_dir` (its manifest's config, as
-    `relocated_config` gives it), found as the analysis of a study directory loads them
+def _spec_fix(manifest: dict, study_dir: Path, restore: str | None = None) -> str:
+    """The fix of a config's spec that cannot be read (`restore`: its absolute path, where the file
+    the study ran can be put back; None: the config is at fault, a relative path or a malformed
+    `SPEC_SHA256`): a package's is to get it again. A study `trustroute import carla-logs` wrote
+    (one imported before the import recorded its specs' SHA-256 among them) can be imported again,
+    which writes its manifest anew."""
+    said = manifest_wording(study_dir)
+    if said is _PACKAGE_WORDING:
+        return said.config_fix
+    fix = (said.config_fix if restore is None else
+           f"restore {restore} (the spec the study was run with), or analyse the study where it was made")
+    if manifest.get("engine") != CARLA_LOGS_ENGINE:
+        return fix
+    return (f"{fix}, or import it again (`trustroute import carla-logs SOURCE --out DIR`), which records "
+            "its specs' SHA-256")
+
+
+def task_files(manifest: dict, study_dir: Path) -> dict[str, list[Path]]:
+    """The files that define the task of the study in `study_dir` (`manifest`: its manifest, its
+    config as `relocated_config` gives it), found as the analysis of a study directory loads them
     (analysis/study_directory.py, `study_inputs`): the specs by `spec_paths`, the town and the
     driver model the config names, else the packaged default ones (`town_file`,
     `driver_model_file`). Config key -> its files."""
-    return {"specs": spec_paths(config, study_dir),
+    config = manifest.get("config") or {}
+    return {"specs": spec_paths(manifest, study_dir),
             "town": [town_file(config.get("town"))],
             "driver_model": [driver_model_file(config.get("driver_model"))]}
 

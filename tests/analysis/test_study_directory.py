@@ -4,16 +4,20 @@ are each one InputError naming the file, the place in it and the fix."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import shutil
 from pathlib import Path
 
 import pytest
 
+from tests.cli import assert_one_line_error, run_cli
 from tests.study_tables import set_values, study_copy
 from trustroute.analysis.study_directory import load_study
 from trustroute.core.dataset import EPISODES_FILE, MANIFEST_FILE, ROADS_FILE
 from trustroute.core.errors import InputError
+from trustroute.core.packaged import PACKAGED_SPECS
+from trustroute.harness.study.inputs import MANIFEST_FIX
 
 # (table, edit, column, what the message says)
 UNKNOWN_NAMES = {
@@ -126,3 +130,79 @@ def test_a_gone_spec_is_not_read_as_the_packaged_one_of_its_name_unless_it_is_th
     # the packaged spec's own SHA-256 recorded: it is the study's spec
     manifest, episodes, _ = load_study(_real_study_naming(tmp_path / "same", str(gone), shipped))
     assert set(episodes["spec"]) == {"phi1", "phi2"}
+
+
+REIMPORT = "or import it again (`trustroute import carla-logs SOURCE --out DIR`), which records its specs'"
+
+
+def _sha256(text: str) -> str:
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def test_a_spec_edited_at_its_recorded_path_since_the_study_ran_is_not_read(tmp_path):
+    """The study ran the lab's own phi1.toml, whose SHA-256 the manifest records, and the file was
+    edited since at the same path: reading it would analyse another spec, so one line names the
+    manifest, the key, the SHA-256 that differs and the fix. The file as the study ran it is read;
+    and where the manifest records the packaged file's SHA-256, the packaged spec, provably the one
+    the study ran, stands in for the edited file."""
+    lab = tmp_path / "lab" / "phi1.toml"
+    lab.parent.mkdir()
+    ran = (PACKAGED_SPECS / "phi1.toml").read_text() + "# the lab's own edit\n"
+    lab.write_text(ran)
+    shipped = json.loads((REAL_STUDY / MANIFEST_FILE).read_text())["config"]["spec_sha256"]
+    study = _real_study_naming(tmp_path, str(lab), [_sha256(ran), shipped[1]])
+    assert load_study(study)[0]["config"]["specs"][0] == str(lab)   # the same file: read
+    lab.write_text(ran + "# edited after the study\n")
+    with pytest.raises(InputError) as info:
+        load_study(study)
+    said = info.value
+    assert (said.source, said.place) == (str(study / MANIFEST_FILE), "config.specs[0]")
+    assert said.problem.startswith(f"the study's spec {lab} changed since the study was run (its SHA-256 "
+                                   "differs from config.spec_sha256[0]), and the packaged phi1.toml is not "
+                                   "provably the spec the study ran")
+    assert said.fix.startswith(f"restore {lab} (the spec the study was run with)")
+    _, episodes, _ = load_study(_real_study_naming(tmp_path / "packaged", str(lab), shipped))
+    assert set(episodes["spec"]) == {"phi1", "phi2"}
+
+
+@pytest.mark.parametrize("recorded", [{"phi1.toml": "x"}, 5, True, "be0ef16eef1fe63f0570b5cc5087d542",
+                                      ["not a digest", None], [None, "6F43B9CB" * 8]])
+def test_a_spec_sha256_that_is_no_list_of_digests_is_one_line(recorded, tmp_path, capsys):
+    """`config.spec_sha256` of another type, or with an entry that is no SHA-256, is refused before any
+    spec is looked for: one line naming the manifest and the key, exit 2 (never a traceback, nor a
+    string read a character at a time); an imported study's fix says it can be imported again."""
+    study = _real_study_naming(tmp_path, "policies/specs/phi1.toml", [])
+    manifest = json.loads((study / MANIFEST_FILE).read_text())
+    manifest["config"]["spec_sha256"] = recorded
+    (study / MANIFEST_FILE).write_text(json.dumps(manifest))
+    code, out, err = run_cli(capsys, "analyze", str(study), "--json")
+    wrong = json.dumps(recorded)[:20] if not isinstance(recorded, list) else "its entry ["
+    assert_one_line_error(code, err, f"{study / MANIFEST_FILE}: config.spec_sha256: not a list of the specs' "
+                          "SHA-256", wrong, MANIFEST_FIX, REIMPORT)
+    assert out == ""
+
+
+def test_a_relative_spec_path_is_said_to_be_no_stored_input_nor_absolute_not_gone(model_study, tmp_path):
+    """A relative spec path is never read, so it is not "gone": it is neither a stored input nor an
+    absolute path, as a town's is said to be; an imported study recorded before the import recorded its
+    specs' SHA-256 is imported again, a simulated study's manifest restored."""
+    from trustroute.harness.study.inputs import config_sha256
+
+    imported = _real_study_naming(tmp_path, "policies/specs/phi1.toml", None)
+    with pytest.raises(InputError) as info:
+        load_study(imported)
+    said = info.value
+    assert said.place == "config.specs[0]" and "gone" not in said.problem
+    assert said.problem.startswith("the study's spec 'policies/specs/phi1.toml' is neither one of its stored "
+                                   "inputs (inputs/...) nor an absolute path, and the packaged phi1.toml is "
+                                   "not provably the spec the study ran (the manifest records no SHA-256")
+    assert REIMPORT in said.fix
+    simulated = study_copy(model_study, tmp_path / "simulated")
+    manifest = json.loads((simulated / MANIFEST_FILE).read_text())
+    manifest["config"]["specs"][0] = "phi1.toml"
+    manifest["inputs"]["config_sha256"] = config_sha256(manifest["config"])
+    (simulated / MANIFEST_FILE).write_text(json.dumps(manifest))
+    with pytest.raises(InputError) as info:
+        load_study(simulated)
+    assert info.value.problem.startswith("the study's spec 'phi1.toml' is neither one of its stored inputs")
+    assert info.value.fix == MANIFEST_FIX and "gone" not in info.value.problem

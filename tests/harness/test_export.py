@@ -25,6 +25,7 @@ from tests.export_checks import (
     package_key,
 )
 from tests.lock_holder import another_process_holds
+from trustroute.core.package import sha256_of
 from trustroute.harness.study.config import load_study_config
 from trustroute.harness.study.export import pseudonyms, read_export_keys
 
@@ -340,6 +341,7 @@ def test_a_task_file_the_package_does_not_ship_is_not_read(tmp_path, capsys):
     study = shutil.copytree("analysis/data/real_study/study", tmp_path / "study")
     manifest = json.loads((study / "manifest.json").read_text())
     manifest["config"]["specs"][0] = str(lab / "phi1.toml")
+    manifest["config"]["spec_sha256"][0] = sha256_of(lab / "phi1.toml")   # the spec the study ran
     (study / "manifest.json").write_text(json.dumps(manifest))
     package = tmp_path / "package"
     code, _, err = run_cli(capsys, "export", str(study), "--out", str(package))

@@ -188,6 +188,32 @@ def test_an_edited_package_s_manifest_is_named_as_the_package_s_own(key, value, 
     assert out == ""
 
 
+def test_a_package_whose_export_left_a_spec_out_says_so(tmp_path, capsys):
+    """A study (here an import, which stores no copy of its inputs) that ran a spec of the lab's disk:
+    the export does not read it, so its package names the spec by the export's placeholder. Analysing
+    the package says the export left the spec out and the package cannot be analysed without it,
+    with a fix that can work (ask the authors, analyse the study directory): not that the spec is
+    "gone", nor to get the package again, which would hold no more."""
+    from trustroute.core.packaged import PACKAGED_SPECS
+    from trustroute.harness.study.export_inputs import PATH_LEFT_OUT
+
+    lab = tmp_path / "lab" / "phi1.toml"
+    lab.parent.mkdir()
+    lab.write_text((PACKAGED_SPECS / "phi1.toml").read_text() + "# the lab's own copy\n")
+    study = Path(shutil.copytree("analysis/data/real_study/study", tmp_path / "study"))
+    manifest = json.loads((study / "manifest.json").read_text())
+    manifest["config"]["specs"][0] = str(lab)
+    manifest["config"]["spec_sha256"][0] = sha256_of(lab)
+    (study / "manifest.json").write_text(json.dumps(manifest))
+    package = exported(capsys, study, tmp_path / "package")
+    assert json.loads((package / "study_config.json").read_text())["specs"][0] == PATH_LEFT_OUT
+    code, out, err = run_cli(capsys, "analyze", str(package), "--json")
+    assert_one_line_error(code, err, f"{package / 'study_manifest.json'}: config.specs[0]: the export left "
+                          "out this spec of the study", "cannot be analysed again without it",
+                          "ask the study's authors for the spec, or analyse the study directory")
+    assert "gone" not in err and "get the package again" not in err and out == ""
+
+
 def test_out_is_the_report_s_folder_alike_at_the_cli_and_the_api(study, tmp_path, capsys):
     """--out (`out=`) names where the report goes: with --no-report (report=False) nothing is
     written, so a folder in the package is neither used nor refused, at the CLI as at the API; a
