@@ -370,11 +370,13 @@ def manifest_wording(study_dir: Path) -> _Wording:
 
 def verify_inputs(manifest: dict, study_dir: Path, checked: dict[str, str] | None = None) -> None:
     """Every stored input the manifest records is present with the hash it records, and so is the
-    manifest's config (`inputs.config_sha256`), or InputError. `checked`: the study is a package, and
-    these are the SHA-256 of the files its SHA256SUMS lists, each verified (trustroute/core/package.py,
-    `verify_package`): the recorded hashes are compared with them, so no file is hashed twice."""
+    manifest's config (`inputs.config_sha256`), or InputError, worded for a study directory or a
+    package as every message on its manifest is (`manifest_wording`). `checked`: the study is a
+    package, and these are the SHA-256 of the files its SHA256SUMS lists, each verified
+    (trustroute/core/package.py, `verify_package`): the recorded hashes are compared with them, so no
+    file is hashed twice."""
     study_dir = Path(study_dir)
-    said = _STUDY_WORDING if checked is None else _PACKAGE_WORDING
+    said = manifest_wording(study_dir)
     for relative, entry in sorted((manifest.get("inputs") or {}).get("files", {}).items()):
         digest = _stored_sha256(study_dir, relative, checked)
         if digest is None:

@@ -206,3 +206,32 @@ def test_a_relative_spec_path_is_said_to_be_no_stored_input_nor_absolute_not_gon
         load_study(simulated)
     assert info.value.problem.startswith("the study's spec 'phi1.toml' is neither one of its stored inputs")
     assert info.value.fix == MANIFEST_FIX and "gone" not in info.value.problem
+
+
+def test_the_inputs_check_words_a_study_directory_as_one_whatever_hashes_it_is_given(model_study, tmp_path):
+    """`verify_inputs` names the manifest and gives the fix by what the folder is (`manifest_wording`,
+    the rule every message on a manifest follows), not by whether its caller passes hashes already
+    verified: a study directory's missing input and edited config are worded as a study directory's
+    (manifest.json, restore it), with its files hashed or their hashes given alike."""
+    from trustroute.core.package import sha256_of
+    from trustroute.harness.study.inputs import verify_inputs
+
+    study = study_copy(model_study, tmp_path / "study")
+    manifest = json.loads((study / MANIFEST_FILE).read_text())
+    recorded = manifest["inputs"]["files"]
+    hashes = {relative: sha256_of(study / relative) for relative in recorded}
+    config = manifest["config"]
+    edited = {**manifest, "config": {**config, "participants": config["participants"] + 1}}
+    for checked in (None, hashes):
+        with pytest.raises(InputError) as info:
+            verify_inputs(edited, study, checked)
+        assert (info.value.source, info.value.place) == (str(study / MANIFEST_FILE), "config")
+        assert info.value.fix == MANIFEST_FIX
+    gone = sorted(recorded)[0]
+    (study / gone).unlink()
+    for checked in (None, {k: v for k, v in hashes.items() if k != gone}):
+        with pytest.raises(InputError) as info:
+            verify_inputs(manifest, study, checked)
+        assert (info.value.source, info.value.place) == (str(study), gone)
+        assert "a stored input of the study is missing" in info.value.problem
+        assert "copy the whole study directory" in info.value.fix
