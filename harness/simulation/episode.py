@@ -50,7 +50,7 @@ from trustroute.harness.simulation.driving_style import AUTOPILOT, apply_style
 from trustroute.harness.simulation.episode_record import EpisodeRecord, StepLog
 from trustroute.harness.simulation.episode_roads import EpisodeRoads, background_vehicles, episode_roads
 from trustroute.harness.simulation.episode_tracker import DrivenRoad, EpisodeSetup, EpisodeTracker
-from trustroute.harness.simulation.incidents import EgoState, Scene
+from trustroute.harness.simulation.incidents import EgoState
 from trustroute.harness.simulation.manual_driving import ManualDriving
 from trustroute.harness.simulation.performance import PerformanceMonitor, limits_for
 from trustroute.harness.simulation.road_run import RoadRun, incidents_table
@@ -186,7 +186,10 @@ class SumoEpisode:
         self._point: DecisionPoint | None = None   # the decision point waiting for its answer
         self._end: End | None = None
         self._closed = False                      # stopped before its end (close, or an error)
-        self._lane_roads: dict[str, str] = {}   # "A-B_1" -> "A-B", ":A_5_0" -> ":A_5"
+        # "A-B_1" -> ("A-B_1", "A-B"), ":A_5_0" -> (":A_5_0", ":A_5"): a lane's road, and the one
+        # copy of its id that the step log holds (SUMO gives a new string every step; repeated
+        # objects are cheaper for the kinematics table to convert)
+        self._lane_roads: dict[str, tuple[str, str]] = {}
 
     @property
     def policy(self) -> RoutingPolicy:
@@ -262,11 +265,11 @@ class SumoEpisode:
         run.injected_time = now
         if run.kind == NO_INCIDENT:
             return   # no scene to place (placing draws nothing)
-        scene = self.roads.place(Scene(
-            road=run.road, reverse_road=None, road_length=self.length(run.road), prefix=f"inc{run.index}",
+        scene = self.roads.place(
+            run.kind, road=run.road, road_length=self.length(run.road), prefix=f"inc{run.index}",
             ego_id=EGO_ID, time=now, ego_distance=ego_distance, rng=self.rng,
             overrides=self.options.scene_overrides.get(run.kind, {}), road_speed=ROAD_SPEED,
-            step_length=self.config.step_length), run.kind)
+            step_length=self.config.step_length)
         run.incident = (None if scene is None else
                         incident_kinds.inject(run.kind, self.sumo, scene, self.defined_types))
         if run.incident is not None:
@@ -277,14 +280,14 @@ class SumoEpisode:
         if run.incident is not None and math.isnan(run.removed_time):
             run.incident.remove(self.sumo)
             run.removed_time = now
+            run.quiet = True
 
     def watch(self, run: RoadRun, ego: EgoState) -> None:
-        """Per-step work for the open road's incident and the driver (only while there is some)."""
+        """Per-step work for the open road's incident and the driver's view of it, while the road
+        has an incident and is not `quiet` (on a road without one the driver decides on entering
+        it: nothing to watch, so the loop builds no ego state for it)."""
         incident = run.incident
-        if incident is None:
-            if ego.road in run.offsets:
-                self.decide(run, ego.time)   # nothing to see: the driver decides on entering the road
-            return
+        assert incident is not None   # (the loop watches only a road with an incident)
         incident.step(self.sumo, ego)
         if not run.decided and ego.time >= run.next_view_check:
             where = incident.position(self.sumo)
@@ -300,8 +303,13 @@ class SumoEpisode:
                     run.next_view_check = ego.time + unseen / MAX_CLOSING
         # The objects stay after the ego has passed (an obstacle never leaves by itself); they are
         # taken out when the road's observation closes.
-        if math.isnan(run.passed_time) and incident.is_passed(self.sumo, ego):
-            run.passed_time = ego.time
+        if math.isnan(run.passed_time):
+            if incident.is_passed(self.sumo, ego):
+                run.passed_time = ego.time
+        elif run.decided and incident.done():
+            # Nothing of this road is left to happen before its end: the steps after this one
+            # neither watch it nor build the ego's state for it.
+            run.quiet = True
 
     # -- the road's end -------------------------------------------------------
     def close_road(self, run: RoadRun, now: float) -> None:
@@ -316,12 +324,6 @@ class SumoEpisode:
         reported = self.driver.report_trust() if self.tracker.should_report() else None
         self.tracker.record_road(DrivenRoad(run.road, run.kind, run.took_over, performance, trust_before,
                                             trust_after, reported, run.time_in, now))
-
-    def watch_open(self, run: RoadRun, ego: EgoState) -> None:
-        """`watch` the open road while there is something to watch (its incident is live, or, with
-        none, the driver has still to decide)."""
-        if not run.decided if run.incident is None else math.isnan(run.removed_time):
-            self.watch(run, ego)
 
     def measure(self, run: RoadRun, ego: EgoState | None, speed: float, accel: float, leader,
                 step: float) -> None:
@@ -466,7 +468,9 @@ class SumoEpisode:
         after_step = self.observer is not None or self.manual is not None
         person = self.person.takeover_request if self.person is not None else None
         max_sim_seconds = self.config.max_sim_seconds
-        isnan = math.isnan
+        # Kept as locals, changed only where they change (the ego appears, reaches the next road).
+        entered = not math.isnan(current.time_in)
+        open_run = upcoming if upcoming is not None else current
         while True:
             simulation_step()
             now_ms += step_ms
@@ -475,12 +479,14 @@ class SumoEpisode:
             if not result or not result[lane_id]:   # not on the net (yet): SUMO's lane id is ""
                 _check_missing_ego(now, start, current)
                 continue
-            if isnan(current.time_in):
+            if not entered:
                 current.time_in = now
+                entered = True
             lane = result[lane_id]
-            road = lane_roads.get(lane)
-            if road is None:
-                road = lane_roads[lane] = lane[:lane.rindex("_")]
+            known = lane_roads.get(lane)
+            if known is None:
+                known = lane_roads[lane] = (lane, lane[:lane.rindex("_")])
+            lane, road = known
             position = result[position_id]
             speed = result[speed_id]
             x, y = result[xy_id]
@@ -489,7 +495,7 @@ class SumoEpisode:
                 current.time_in = now
                 commit_at = self.length(current.road) - COMMIT_DISTANCE
                 self.current, self.upcoming, self.commit_at = current, upcoming, commit_at
-            open_run = upcoming if upcoming is not None else current
+                open_run = current
             if background_step is not None:
                 background_step(sumo)
             along = current.offsets.get(road)   # where the ego's edge starts along the road
@@ -499,7 +505,10 @@ class SumoEpisode:
                 self.person_control(open_run, now, person(now), commits)
             if open_run.index > 0:
                 ego = None
-                if not open_run.decided if open_run.incident is None else isnan(open_run.removed_time):
+                incident = open_run.incident
+                if incident is None and not open_run.decided and road in open_run.offsets:
+                    self.decide(open_run, now)   # nothing to see: the driver decides on entering
+                elif incident is not None and not open_run.quiet:
                     ego = EgoState(now, road, position, x, y, speed, lane, result[angle_id], result[accel_id])
                     self.watch(open_run, ego)
                 if self.mode == auto:

@@ -8,9 +8,8 @@ vehicles (a built net) or comes from route files (an imported net).
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 from trustroute.app.nets import net_for
 from trustroute.harness.simulation.episode_net import check_net_matches, check_readable, net_key
@@ -46,9 +45,11 @@ class EpisodeRoads(Protocol):
         """The SUMO edges `road` runs along, in driving order (its end is the last one's end)."""
         ...
 
-    def place(self, scene: Scene, kind: str) -> Scene | None:
-        """`scene`, given for the whole model road, placed on the net; None: the incident cannot
-        happen on this net."""
+    def place(self, kind: str, **scene: Any) -> Scene | None:
+        """The scene of an incident of `kind` placed on the net, from the fields of a `Scene` given
+        for the whole model road (all but its placement on the net: `reverse_road`,
+        `observed_length` and the lanes and junctions); None: the incident cannot happen on this
+        net. (The Scene is made once, here: a copy with changed fields costs more than making it.)"""
         ...
 
     def start(self, road: str, depart: float) -> tuple[list[str], float]:
@@ -88,10 +89,11 @@ class BuiltRoads:
     def chain(self, road: str) -> tuple[str, ...]:
         return one_edge(road)
 
-    def place(self, scene: Scene, kind: str) -> Scene:
-        other_way = Road.parse(scene.road).reverse.id
+    def place(self, kind: str, **scene: Any) -> Scene:
+        other_way = Road.parse(scene["road"]).reverse.id
         reverse = other_way if other_way in self.town.incidents else None
-        return replace(scene, reverse_road=reverse, observed_length=scene.road_length - self.commit_distance)
+        observed = scene["road_length"] - self.commit_distance
+        return Scene(**scene, reverse_road=reverse, observed_length=observed)
 
     def start(self, road: str, depart: float) -> tuple[list[str], float]:
         return [road], depart
@@ -125,8 +127,8 @@ class ImportedRoads:
     def chain(self, road: str) -> tuple[str, ...]:
         return self.real.chain(road)
 
-    def place(self, scene: Scene, kind: str) -> Scene | None:
-        return real_scene(self.real, scene.road, kind, scene)
+    def place(self, kind: str, **scene: Any) -> Scene | None:
+        return real_scene(self.real, scene["road"], kind, Scene(**scene, reverse_road=None))
 
     def start(self, road: str, depart: float) -> tuple[list[str], float]:
         return self.real.start(road, depart)

@@ -41,6 +41,8 @@ class RoadRun:
     takeover_end: float = math.nan
     committed: bool = False
     next_view_check: float = -math.inf
+    # Nothing left to watch on the road: its incident removed, or decided, passed and `done`.
+    quiet: bool = False
     monitor: PerformanceMonitor = field(default_factory=PerformanceMonitor)
     offsets: dict[str, float] = field(default_factory=dict)   # edge -> where it starts along the road
 

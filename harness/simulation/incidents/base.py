@@ -108,6 +108,11 @@ class Incident(Protocol):
     def is_passed(self, sumo, ego: EgoState) -> bool:
         """True once the ego is past the incident."""
 
+    def done(self) -> bool:
+        """True once `step` and `measure` can do nothing more (what acts or is measured has left
+        the simulation, or never acts): once the ego has passed it too, the episode stops
+        stepping it (nothing then changes until the road's end removes it)."""
+
     def remove(self, sumo) -> None:
         """Take every SUMO object of the incident out of the simulation (safe to call twice)."""
 

@@ -83,6 +83,10 @@ class ObstacleIncident:
         if self.oncoming is not None:
             self.oncoming.measure(sumo, ego, monitor)
 
+    def done(self) -> bool:
+        # The parked object does nothing per step; an oncoming vehicle acts until it has left.
+        return self.oncoming is None or self.oncoming.done()
+
     def is_passed(self, sumo, ego: EgoState) -> bool:
         # Past it on its own road, or on the oncoming lane beside and beyond it.
         if ego.road == self.road:

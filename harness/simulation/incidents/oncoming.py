@@ -172,6 +172,10 @@ class OncomingVehicle:
         if ttc < WATCH_HORIZON:
             monitor.head_on(ttc)
 
+    def done(self) -> bool:
+        """Inserted and out of the simulation again: `step` and `measure` do nothing from now on."""
+        return self.inserted and self._gone
+
     def remove(self, sumo: Sumo) -> None:
         # One known to be out of the simulation (never added, left, or taken out behind the ego)
         # is not asked for: SUMO's refusal is an exception, dearer than the removal itself.

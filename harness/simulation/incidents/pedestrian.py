@@ -229,6 +229,10 @@ class PedestrianIncident:
     def is_passed(self, sumo, ego: EgoState) -> bool:
         return ego.road == self.road and ego.lane_position > self.passed_after
 
+    def done(self) -> bool:
+        # Taken out, and the guard released (or never needed): `step` and `measure` do nothing.
+        return self.left and (self.cleared or self.timing == "none")
+
     def remove(self, sumo) -> None:
         # Also reaches an object still waiting for insertion; one already gone raises, and that is fine.
         if self.inserted and not self.left:

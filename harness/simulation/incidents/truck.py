@@ -79,6 +79,9 @@ class TruckIncident:
     def is_passed(self, sumo, ego: EgoState) -> bool:
         return not math.isnan(self.oncoming.met_time)   # they have met
 
+    def done(self) -> bool:
+        return self.oncoming.done()   # the parked car does nothing per step
+
     def remove(self, sumo) -> None:
         self.oncoming.remove(sumo)
         if self.parked_id is not None:

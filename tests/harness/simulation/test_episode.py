@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import math
+from collections import Counter
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -10,8 +13,9 @@ from tests.harness.helpers import SPECS
 from trustroute.core.dataset import KINEMATICS_SCHEMA, ROADS_SCHEMA
 from trustroute.core.errors import InputError
 from trustroute.harness.simulation import sumo_start
-from trustroute.harness.simulation.episode import EpisodeOptions, run_episode
+from trustroute.harness.simulation.episode import EpisodeOptions, SumoEpisode, run_episode
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
+from trustroute.harness.simulation.stepping import run_to_end
 from trustroute.networks.sumo_net import build_net
 from trustroute.networks.town import town_from_dict
 from trustroute.participants.synthetic_driver import SyntheticDriver
@@ -174,6 +178,36 @@ def test_the_nets_static_facts_are_read_once_per_started_simulation(setup, net_p
     sumo_start.close_simulation()
     _episode(setup, net_path, 0)
     assert len(read) == 2 * first
+
+
+def test_a_road_whose_incident_is_over_is_watched_no_more(setup, net_path, monkeypatch):
+    """Once a road's incident is decided, passed and done (the person taken out behind the ego, the
+    truck gone after the meeting), the episode stops stepping it: at most the one step that finds
+    it so enters `watch` with it over. The person alone is over for about 16 steps of each episode."""
+    watch = SumoEpisode.watch
+    over = Counter()   # (episode, road index) -> steps that watched the road with its incident over
+
+    def watched(self, run, ego):
+        if run.decided and not math.isnan(run.passed_time) and run.incident.done():
+            over[id(self), run.index] += 1
+        watch(self, run, ego)
+
+    monkeypatch.setattr(SumoEpisode, "watch", watched)
+    episodes = [_episode(setup, net_path, seed) for seed in range(6)]
+    assert sum(len(record.incidents) for record in episodes) >= 12
+    assert len(over) >= 6 and max(over.values()) == 1
+
+
+def test_the_step_log_keeps_one_string_per_lane(setup, net_path):
+    """SUMO gives the ego's lane id as a new string every step; the step log keeps one copy of each
+    (the kinematics table converts repeated objects faster), the same ids as SUMO's."""
+    driver = SyntheticDriver(setup.driver_model, np.random.default_rng(3))
+    episode = SumoEpisode(setup, trust_free_policy(setup.town, setup.spec), driver, "e", 3,
+                          EpisodeOptions(net_path=net_path))
+    record = run_to_end(episode)
+    lanes = episode.steps.lanes
+    assert lanes == record.kinematics["lane"].tolist() and len(lanes) > 50
+    assert len({id(lane) for lane in lanes}) == len(set(lanes)) < 20
 
 
 class LoopPolicy(RoutingPolicy):
