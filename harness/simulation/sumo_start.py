@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+import stat
 import tempfile
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
@@ -247,12 +248,24 @@ def _one_user() -> Iterator[None]:
         _in_use.remove(os.getpid())
 
 
-def _started_on(command: list[str], net_path: Path) -> tuple:
-    """The command line without its seed, and the net file's identity: a net rewritten in place
-    (a town imported again into the same folder) is another simulation."""
+def _net_file(net_path: Path) -> os.stat_result:
+    """The net file's status, read once per session: it is a file (`require_net_file`'s one-line
+    error otherwise) and its identity (`_started_on`) in one system call, not two."""
+    try:
+        found = os.stat(net_path)
+        if stat.S_ISREG(found.st_mode):
+            return found
+    except (OSError, ValueError):
+        pass
+    require_net_file(net_path)   # not a file: the error that says so
+    return os.stat(net_path)     # (it became one in between)
+
+
+def _started_on(command: list[str], net: os.stat_result) -> tuple:
+    """The command line without its seed, and the net file's identity (`net`, its status): a net
+    rewritten in place (a town imported again into the same folder) is another simulation."""
     at = command.index("--seed")
-    stat = Path(net_path).stat()
-    return (*command[:at], *command[at + 2:], stat.st_ino, stat.st_size, stat.st_mtime_ns)
+    return (*command[:at], *command[at + 2:], net.st_ino, net.st_size, net.st_mtime_ns)
 
 
 def net_fact(key: tuple, read: Callable[[], T]) -> T:
@@ -308,17 +321,18 @@ def _start(sumo: Sumo, command: list[str], net_path: Path, config: SumoConfig) -
                          "rebuild it with `trustroute net build` (delete the cached file)") from None
 
 
-def _empty_simulation(command: list[str], net_path: Path, config: SumoConfig) -> Sumo:
+def _empty_simulation(command: list[str], net_path: Path, net: os.stat_result, config: SumoConfig) -> Sumo:
     """libsumo in the empty state of `command`'s start: the open simulation returned to its
-    snapshot when it runs the same command line (the seed aside), else a fresh start."""
+    snapshot when it runs the same command line (the seed aside) on the same net file (`net`, its
+    status), else a fresh start."""
     sumo = _libsumo()
-    key = _started_on(command, net_path)
+    key = _started_on(command, net)
     if _open and _open[0].started_on == key:
         with contextlib.suppress(Exception):   # a snapshot that no longer loads: start afresh below
             sumo.simulation.loadState(str(_open[0].snapshot))
             return sumo
     close_simulation()
-    _start(sumo, command, net_path, config)
+    _start(sumo, command, Path(net_path), config)
     folder = Path(tempfile.mkdtemp(prefix="trustroute-sumo-"))
     snapshot = folder / "empty.state.xml"
     sumo.simulation.saveState(str(snapshot))
@@ -340,9 +354,9 @@ def sumo_session(net_path: Path, seed: int, config: SumoConfig) -> Iterator[Sumo
         with fresh_session(net_path, seed, config) as sumo:
             yield sumo
         return
-    require_net_file(net_path)
+    net = _net_file(net_path)
     with _one_user():
-        sumo = _empty_simulation(sumo_command(net_path, seed, config), Path(net_path), config)
+        sumo = _empty_simulation(sumo_command(net_path, seed, config), net_path, net, config)
         try:
             yield sumo
         except BaseException:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 from collections import Counter
 
 import numpy as np
@@ -208,6 +209,26 @@ def test_the_step_log_keeps_one_string_per_lane(setup, net_path):
     lanes = episode.steps.lanes
     assert lanes == record.kinematics["lane"].tolist() and len(lanes) > 50
     assert len({id(lane) for lane in lanes}) == len(set(lanes)) < 20
+
+
+def test_a_reused_simulation_reads_the_net_files_status_once(setup, net_path, monkeypatch):
+    """Returning the open simulation to its snapshot checks the net is a file and reads its
+    identity (rewritten in place: another simulation) with one status read of the file."""
+    config = sumo_start.SumoConfig()
+    with sumo_start.sumo_session(net_path, 1, config):
+        pass
+    status = os.stat
+    read = []
+
+    def noted(path, *args, **kwargs):
+        if os.fspath(path) == os.fspath(net_path):
+            read.append(path)
+        return status(path, *args, **kwargs)
+
+    monkeypatch.setattr(os, "stat", noted)
+    with sumo_start.sumo_session(net_path, 2, config):
+        pass
+    assert len(read) == 1
 
 
 class LoopPolicy(RoutingPolicy):
