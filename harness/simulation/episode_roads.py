@@ -149,7 +149,10 @@ def episode_roads(town: Town, net_path: Path | None, commit_distance: float) -> 
         roads: EpisodeRoads = ImportedRoads(net, RealRoads(road_edges(town, net), commit_distance))
         net_key(net)   # a missing file is the one-line error
         return roads
-    net = net_for(town) if net_path is None else Path(net_path)
+    if net_path is None:
+        net = net_for(town)
+    else:   # a Path given is used as it is: making it again parses each of its parts, every episode
+        net = net_path if isinstance(net_path, Path) else Path(net_path)
     key = net_key(net)
     if net_path is not None:
         check_readable(net, key)

@@ -119,7 +119,8 @@ class OncomingVehicle:
         if where is None:   # not yet inserted, or gone
             return
         x, y = where
-        self._next_meeting_check = self._quiet_until(ego.time, math.dist((x, y), (ego.x, ego.y)))
+        gap = math.dist(where, (ego.x, ego.y))
+        self._next_meeting_check = self._quiet_until(ego.time, gap)
         if self.road_before and not self._on_road:
             # Still on the road leading in or turning: its heading says nothing about the meeting.
             if sumo.vehicle.getRoadID(self.vehicle_id) != self.road:
@@ -130,7 +131,7 @@ class OncomingVehicle:
         if (ego.x - x) * math.sin(angle) + (ego.y - y) * math.cos(angle) <= 0:
             self.met_time, self.met_x, self.met_y = ego.time, x, y
         else:
-            self._back_off_when_stuck(sumo, ego, math.dist((x, y), (ego.x, ego.y)))
+            self._back_off_when_stuck(sumo, ego, gap)
 
     def _back_off_when_stuck(self, sumo: Sumo, ego: EgoState, gap: float) -> None:
         """The truck leaves once it and the ego have stood nose to nose for BACK_OFF_SECONDS
