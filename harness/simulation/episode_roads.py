@@ -49,7 +49,8 @@ class EpisodeRoads(Protocol):
         """The scene of an incident of `kind` placed on the net, from the fields of a `Scene` given
         for the whole model road (all but its placement on the net: `reverse_road`,
         `observed_length` and the lanes and junctions); None: the incident cannot happen on this
-        net. (The Scene is made once, here: a copy with changed fields costs more than making it.)"""
+        net. (Given as fields, so that a built net makes its Scene once: a copy with changed
+        fields, dataclasses.replace, costs more than making one.)"""
         ...
 
     def start(self, road: str, depart: float) -> tuple[list[str], float]:
