@@ -27,8 +27,10 @@ while it keeps the pipe's reading end open itself, so a worker that exits before
 function, and nothing is sent. A pool starts all its workers before it hands any of them the
 function: a send waits until its worker has imported what it needs (seconds) and read it, so
 workers started one after the other's send would import one after the other. A worker that dies is
-replaced at the pool's next round, once every death seen with it is counted (workers of an unguarded
-script die together: the pool stops without spawning more), and only if a task waits for it.
+replaced at the pool's next round, once every death seen with it is counted, and only if a task
+waits for it; START_FAILURES workers ending in a row before they are ready stop the pool. A worker
+stopped before it was handed the function is not sent the stop word (it would take it for the
+function): its pipe is closed, and it returns at the end of the pipe.
 """
 
 from __future__ import annotations
@@ -175,8 +177,9 @@ class _Worker(Generic[Task]):
             raise
 
     def stop(self) -> None:
-        with contextlib.suppress(OSError, ValueError):
-            self.connection.send(None)
+        if self.unsent is None:   # it has its function: None is the stop word between tasks
+            with contextlib.suppress(OSError, ValueError):
+                self.connection.send(None)
         self.connection.close()
 
 

@@ -135,6 +135,22 @@ def test_ctrl_c_while_a_spawned_worker_is_handed_its_function_stops_it(monkeypat
     assert set(multiprocessing.active_children()) <= before
 
 
+@pytest.mark.parametrize("method", ["spawn", "forkserver"])
+def test_a_worker_stopped_before_it_is_handed_its_function_ends_quietly(method, capfd):
+    """A pool interrupted after starting its workers and before handing them the function stops
+    them: each returns at the end of its pipe (exit code 0), and none reads the stop word as its
+    function and dies writing Ready into the closed pipe (a BrokenPipeError traceback, exit 1)."""
+    import multiprocessing
+
+    from trustroute.harness.study import workers
+
+    worker = workers._Worker(multiprocessing.get_context(method), abs)
+    worker.stop()
+    worker.process.join(60)
+    assert worker.process.exitcode == 0
+    assert "Traceback" not in capfd.readouterr().err
+
+
 def test_a_worker_that_became_ready_breaks_the_row_of_workers_exiting_while_they_start(monkeypatch):
     """Two workers exiting while they start stop the pool only in a row: one that became ready
     between them (it runs its tasks) shows the workers can start, and the next one's exit fails
