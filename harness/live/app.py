@@ -62,6 +62,7 @@ from trustroute.harness.live.guard import (
     ConnectionGate,
     GuardedRoute,
     GuardedServer,
+    GuardedWebSocketProtocol,
     RequestGuard,
     connection_cap,
     guarded_protocol,
@@ -562,14 +563,17 @@ async def receive_all(websocket: WebSocket, session: Session, buckets: tuple[Tok
 def live_server(study: LiveStudy, sock):
     """The uvicorn server of `study` for the bound socket `sock` (its `run(sockets=[sock])` serves);
     the server's own origins are those of the socket's address; its connections capped
-    (`ServerOptions.max_connections`, by default sized for the study: guard.connection_cap)."""
+    (`ServerOptions.max_connections`, by default sized for the study: guard.connection_cap), and
+    those of one address (`ServerOptions.connections_per_address`: guard.address_cap)."""
     import uvicorn
 
     host, port = sock.getsockname()[:2]
     app = live_app(study, own_origins(host, port))
-    cap = study.options.max_connections or connection_cap(study.config.participants)
+    options = study.options
+    cap = options.max_connections or connection_cap(study.config.participants)
+    http = guarded_protocol(options.request_seconds, cap, options.connections_per_address)
     config = uvicorn.Config(app, log_level="warning", ws_max_size=4 * MAX_MESSAGE_BYTES, lifespan="off",
-                            http=guarded_protocol(study.options.request_seconds, cap), timeout_keep_alive=5)
+                            http=http, ws=GuardedWebSocketProtocol, timeout_keep_alive=5)
     return GuardedServer(config)
 
 

@@ -26,6 +26,17 @@
   503 and closed as it is accepted, so clients that open connections and send nothing cannot use
   up the server's file descriptors. Should accept() still fail for want of descriptors, asyncio's
   traceback per attempt becomes one warning (`GuardedServer`).
+- **Connections per address.** At most CONNECTIONS_PER_ADDRESS of those from one address (two
+  stations' browsers' worth), answered as beyond the cap in all: one machine holding idle sockets
+  cannot take every slot. Loopback is not capped by default: the machine's own clients (the
+  console, scripts) and a reverse proxy in front of the server, for which every client is one
+  address, share the cap in all (`ServerOptions.connections_per_address` caps every address).
+- **Quiet refusals.** A refusal costs its client one response and the server no log line beyond
+  uvicorn's one warning for a request it cannot parse: the answer to a request whose framing broke
+  after its headers (h11 has answered 400 and is closing the connection) is dropped, not sent on
+  the closing connection (`GuardedH11Protocol.send_400_response`), and a websocket handshake
+  refused by an HTTP response (ASGI's denial response: the 421 of a foreign Host) counts as a
+  completed handshake (`GuardedWebSocketProtocol`).
 - **Slow clients.** `GuardedH11Protocol` closes an HTTP connection whose request (headers and
   body, or a websocket handshake) is not complete within `request_seconds` of its first byte or
   of the connection (idle, slow headers, slow body: uvicorn has a keep-alive timeout only between
@@ -53,6 +64,7 @@ from starlette.requests import Request
 from starlette.responses import JSONResponse, Response
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from uvicorn.protocols.http.h11_impl import H11Protocol
+from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 
 from trustroute.core.errors import InputError
 from trustroute.harness.live.protocol import (
@@ -68,6 +80,7 @@ OPEN_BURST = 5         # new websockets a participant may open at once ...
 OPEN_RATE = 0.5        # ... and per second after that
 CONNECTIONS_PER_PARTICIPANT = 8   # their 2 websockets and the 6 HTTP connections a browser keeps to a host
 CONNECTIONS_SPARE = 32            # the experimenter's console, scripts, connections being closed
+CONNECTIONS_PER_ADDRESS = 2 * CONNECTIONS_PER_PARTICIPANT   # from one address other than loopback
 FULL_TEXT = b"too many open connections; try again later"
 FULL = (b"HTTP/1.1 503 Service Unavailable\r\nContent-Type: text/plain\r\nConnection: close\r\n"
         b"Content-Length: %d\r\n\r\n%s" % (len(FULL_TEXT), FULL_TEXT))
@@ -84,12 +97,16 @@ PARSED_BODY = "trustroute.parsed_body"   # the scope key of a body's JSON, as Re
 
 
 def is_loopback(host: str) -> bool:
+    """Whether `host` names this machine's loopback (an IPv4 one mapped into IPv6, as a dual-stack
+    bind sees an IPv4 peer, too)."""
     if host == "localhost":
         return True
     try:
-        return ipaddress.ip_address(host.strip("[]")).is_loopback
+        address = ipaddress.ip_address(host.strip("[]"))
     except ValueError:
         return False
+    mapped = address.ipv4_mapped if isinstance(address, ipaddress.IPv6Address) else None
+    return (mapped or address).is_loopback
 
 
 def shown_host(host: str) -> str:
@@ -338,26 +355,58 @@ def connection_cap(participants: int) -> int:
     return wanted if files == resource.RLIM_INFINITY else max(1, min(wanted, files // 2))
 
 
+def address_cap(host: str, per_address: int | None) -> int | None:
+    """The open connections one peer address may hold (the module's "Connections per address"):
+    `per_address` if given, else CONNECTIONS_PER_ADDRESS, loopback uncapped (None)."""
+    if per_address is not None:
+        return per_address
+    return None if is_loopback(host) else CONNECTIONS_PER_ADDRESS
+
+
 class GuardedH11Protocol(H11Protocol):
-    """uvicorn's HTTP/1.1 protocol with a cap on open connections and a deadline on every
-    request: a connection beyond `max_connections` is answered 503 and closed at once; one that
-    has not sent a whole request (headers and body) within `request_seconds` of being opened, or
-    of its previous response, is closed (a websocket upgrade leaves this protocol, and the
-    deadline with it; it stays counted). Set both on a subclass (`guarded_protocol`)."""
+    """uvicorn's HTTP/1.1 protocol with caps on open connections and a deadline on every
+    request: a connection beyond `max_connections`, or beyond its address's cap (`address_cap` of
+    `per_address`), is answered 503 and closed at once; one that has not sent a whole request
+    (headers and body) within `request_seconds` of being opened, or of its previous response, is
+    closed (a websocket upgrade leaves this protocol, and the deadline with it; it stays counted).
+    Set them on a subclass (`guarded_protocol`)."""
 
     request_seconds = 10.0
     max_connections = 1 << 30
+    per_address: int | None = None
 
     request_deadline: asyncio.TimerHandle | None = None
 
     def connection_made(self, transport) -> None:
         super().connection_made(transport)
         self.request_deadline = None
-        if len(self.connections) > self.max_connections:   # (this one counted)
+        if len(self.connections) > self.max_connections or self.crowded():   # (this one counted)
             transport.write(FULL)
             transport.close()
             return
         self.arm()
+
+    def crowded(self) -> bool:
+        """Whether this connection's address holds more open connections (HTTP and websocket,
+        this one counted) than its cap."""
+        if not self.client:
+            return False
+        host = self.client[0]
+        cap = address_cap(host, self.per_address)
+        if cap is None:
+            return False
+        peers = [each.client for each in self.connections   # (the protocols this server speaks)
+                 if isinstance(each, (H11Protocol, WebSocketsSansIOProtocol))]
+        return sum(peer is not None and peer[0] == host for peer in peers) > cap
+
+    def send_400_response(self, msg: str) -> None:
+        """uvicorn's 400 for a request it cannot parse, which closes the connection; a request
+        whose framing broke after its headers is with the application already: its answer is
+        dropped (uvicorn would send it on the closing connection, fail, and log a traceback)."""
+        super().send_400_response(msg)
+        if self.cycle is not None:
+            self.cycle.disconnected = True
+            self.cycle.message_event.set()   # a body being read ends (http.disconnect)
 
     def arm(self) -> None:
         self.disarm()
@@ -393,9 +442,22 @@ class GuardedH11Protocol(H11Protocol):
         transport.close()
 
 
-def guarded_protocol(request_seconds: float, max_connections: int) -> type[GuardedH11Protocol]:
+def guarded_protocol(request_seconds: float, max_connections: int,
+                     per_address: int | None = None) -> type[GuardedH11Protocol]:
     return type("GuardedH11", (GuardedH11Protocol,), {"request_seconds": float(request_seconds),
-                                                      "max_connections": int(max_connections)})
+                                                      "max_connections": int(max_connections),
+                                                      "per_address": per_address})
+
+
+class GuardedWebSocketProtocol(WebSocketsSansIOProtocol):
+    """uvicorn's websocket protocol (the one it picks with `websockets` installed), whose
+    handshake refused by an HTTP response (ASGI's websocket denial response) counts as completed:
+    uvicorn's logs "ASGI callable returned without completing handshake" for each."""
+
+    async def send(self, message: Message) -> None:  # type: ignore[override]
+        await super().send(message)  # type: ignore[arg-type]
+        if message["type"] == "websocket.http.response.body" and not message.get("more_body", False):
+            self.handshake_complete = True
 
 
 class GuardedServer(uvicorn.Server):

@@ -73,6 +73,7 @@ class ServerOptions:
     idle_seconds: float = 60.0     # a websocket silent this long is closed (the station pings)
     request_seconds: float = 10.0  # an HTTP request not complete this long after it began is cut
     max_connections: int | None = None   # open at once (None: sized for the study, guard.connection_cap)
+    connections_per_address: int | None = None   # of those, from one address (None: guard.address_cap)
 
     def __post_init__(self) -> None:
         """The pace and the resume window as `trustroute live` takes them (the ranges both check)."""
