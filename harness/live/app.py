@@ -57,6 +57,7 @@ from trustroute.harness.live.auth import (
     PARTICIPANT_COOKIE,
     presented_token,
     token_digest,
+    well_formed,
 )
 from trustroute.harness.live.guard import (
     ConnectionGate,
@@ -287,7 +288,7 @@ def login(request: Request, token: str = "") -> RedirectResponse | HTMLResponse:
     if holds_role(request, PARTICIPANT_COOKIE):   # (the link is not spent: it works in another browser)
         refusal = refused(409, "out_of_order", STATION_HERE)
         return refused_page(request, refusal, CONSOLE_TITLE, STATION_HERE)
-    session = study_of(request).login(token[:200] or None)
+    session = study_of(request).login(well_formed(token))
     if session is None:
         refusal = refused(403, "forbidden", "this login link is spent or unknown; ask the server for a new "
                                             "one (POST /api/login-link with the experimenter token)")

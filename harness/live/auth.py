@@ -41,14 +41,20 @@ def token_digest(token: str) -> str:
     return hashlib.sha256(token.encode()).hexdigest()
 
 
-def presented_token(headers: Mapping[str, str], cookies: Mapping[str, str], cookie: str) -> str | None:
-    """The token a request carries: the Bearer header first, else the named cookie; None when
-    there is none or it cannot be one of ours (too long, not ASCII)."""
-    authorization = headers.get("authorization", "")
-    token = authorization[7:].strip() if authorization.lower().startswith("bearer ") else cookies.get(cookie)
+def well_formed(token: str | None) -> str | None:
+    """`token`, or None when it cannot be one of ours (empty, longer than MAX_TOKEN_CHARS, not
+    ASCII): such a token is refused before it is hashed."""
     if not token or len(token) > MAX_TOKEN_CHARS or not token.isascii():
         return None
     return token
+
+
+def presented_token(headers: Mapping[str, str], cookies: Mapping[str, str], cookie: str) -> str | None:
+    """The token a request carries: the Bearer header first, else the named cookie; None when
+    there is none or it cannot be one of ours (`well_formed`)."""
+    authorization = headers.get("authorization", "")
+    return well_formed(authorization[7:].strip() if authorization.lower().startswith("bearer ")
+                       else cookies.get(cookie))
 
 
 @dataclass

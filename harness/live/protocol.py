@@ -29,6 +29,7 @@ from pydantic import (
     model_validator,
 )
 
+from trustroute.harness.live.auth import MAX_TOKEN_CHARS
 from trustroute.harness.live.view import ROUTE_AHEAD, VIEW_RADIUS
 from trustroute.harness.simulation.driving_style import AUTOPILOT, MANUAL
 from trustroute.harness.study.config import LiveInput
@@ -259,7 +260,7 @@ class NewParticipant(Message):
 class LinkClaim(Message):
     """The token of a participant's link, claimed by the link's page."""
 
-    token: Annotated[str, Field(min_length=1, max_length=128)]
+    token: Annotated[str, Field(min_length=1, max_length=MAX_TOKEN_CHARS)]
 
 
 def confirmed(value: bool) -> bool:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import hashlib
 import json
 import os
 import secrets
@@ -23,7 +24,12 @@ from trustroute.harness.live.app import (
     STATION_HERE,
     live_app,
 )
-from trustroute.harness.live.auth import CONSOLE_IDLE_SECONDS
+from trustroute.harness.live.auth import (
+    CONSOLE_IDLE_SECONDS,
+    EXPERIMENTER_COOKIE,
+    MAX_TOKEN_CHARS,
+    PARTICIPANT_COOKIE,
+)
 from trustroute.harness.live.protocol import (
     BURST,
     MAX_BODY_BYTES,
@@ -178,6 +184,34 @@ def test_secure_cookies_for_studies_served_over_https(tmp_path):
             assert "secure" in response.headers["set-cookie"].lower()
     finally:
         study.close()
+
+
+def test_an_over_long_token_is_refused_before_it_is_hashed(client, live_study, monkeypatch):
+    """A token longer than MAX_TOKEN_CHARS is no token of ours, wherever it is presented: it is
+    refused without being hashed (a megabyte-long header costs no hashing)."""
+    sha256, hashed = hashlib.sha256, []
+    long = "A" * (MAX_TOKEN_CHARS + 1)
+
+    def counting(data=b"", *args, **kwargs):
+        hashed.extend([data] if long.encode()[:MAX_TOKEN_CHARS] in bytes(data) else [])
+        return sha256(data, *args, **kwargs)
+
+    monkeypatch.setattr(hashlib, "sha256", counting)
+    for path in ("/api/me", "/api/participants", "/console", "/station", "/api/net"):
+        assert client.get(path, headers=bearer(long)).status_code in (401, 403), path
+    for cookie in (PARTICIPANT_COOKIE, EXPERIMENTER_COOKIE):
+        client.cookies.set(cookie, long)
+        assert client.get("/api/me").status_code == 403 and client.get("/console").status_code in (401, 403)
+        client.cookies.clear()
+    assert client.get(f"/login?token={long}", follow_redirects=False).status_code == 403
+    assert client.post("/api/claim", json={"token": long}).status_code == 422
+    with pytest.raises(WebSocketDisconnect) as closed:
+        with client.websocket_connect("/ws", headers=bearer(long)):
+            pass
+    assert closed.value.code == POLICY_VIOLATION
+    assert hashed == []
+    assert client.get("/api/me", headers=bearer(long[:MAX_TOKEN_CHARS])).status_code == 403
+    assert hashed   # one at the cap is looked up (hashed): the counting sees it
 
 
 def test_tokens_are_stored_only_as_digests(client, live_study):

@@ -16,6 +16,8 @@ import httpx
 import pytest
 from fastapi.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
+from websockets.exceptions import ConnectionClosed
+from websockets.sync.client import connect as connect_socket
 
 from tests.cli import assert_one_line_error, run_cli
 from trustroute.harness.live import scripted
@@ -132,18 +134,24 @@ def test_connections_per_participant_are_limited(client, live_study):
     assert gate.admit(0)
 
 
+@pytest.mark.wallclock
 def test_a_silent_socket_is_closed(tmp_path):
+    """On the real server, every wait bounded: a socket left open past its idle time fails the
+    test rather than hanging it."""
     study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions(idle_seconds=0.3)).open()
     try:
-        with TestClient(live_app(study)) as client:
-            token = new_participant(client, study)
-            with client.websocket_connect("/ws", headers=bearer(token)) as socket_:
-                socket_.receive_json(), socket_.receive_json()
+        with serving(study) as (address, port):
+            token = httpx.post(f"http://{address}:{port}/api/participants", json={},
+                               headers=bearer(study.experimenter_token)).json()["token"]
+            with connect_socket(f"ws://{address}:{port}/ws", additional_headers=bearer(token),
+                                open_timeout=5) as socket_:
+                socket_.recv(timeout=5), socket_.recv(timeout=5)
                 started = time.monotonic()
-                assert "nothing received" in socket_.receive_json()["detail"]
-                with pytest.raises(WebSocketDisconnect) as closed:
-                    socket_.receive_json()
-                assert closed.value.code == IDLE and time.monotonic() - started < 3.0
+                assert "nothing received" in json.loads(socket_.recv(timeout=3.0))["detail"]
+                with pytest.raises(ConnectionClosed) as closed:
+                    socket_.recv(timeout=3.0)
+                assert closed.value.rcvd is not None and closed.value.rcvd.code == IDLE
+                assert time.monotonic() - started < 3.0
     finally:
         study.close()
 
