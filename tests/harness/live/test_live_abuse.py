@@ -7,8 +7,6 @@ from __future__ import annotations
 import base64
 import os
 import re
-import socket
-import time
 
 import httpx
 import pytest
@@ -20,7 +18,7 @@ from trustroute.harness.live.protocol import MAX_MESSAGE_BYTES
 from trustroute.harness.live.server import LiveStudy, ServerOptions
 
 from .conftest import experimenter, live_server_of, serving, tiny_config
-from .test_live_sessions import closed_within, host, served_request
+from .test_live_sessions import closed_within, host
 
 pytestmark = pytest.mark.wallclock
 
@@ -64,35 +62,6 @@ def test_refusals_of_clients_without_a_token_write_no_error_to_the_log(study, ca
     out, err = capfd.readouterr()   # (the server has stopped: all it had to say is said)
     for failure in LOGGED_FAILURES:
         assert failure not in out + err, (out + err)[:2000]
-
-
-def test_one_address_cannot_hold_every_connection(tmp_path):
-    """Idle connections from one address beyond its cap are answered 503 at once, while the cap
-    in all is far from reached; the address's open ones are still served, and once one closes
-    it may open another."""
-    options = ServerOptions(request_seconds=5.0, max_connections=40, connections_per_address=3)
-    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", options).open()
-    try:
-        with serving(study) as address:
-            held = [socket.create_connection(address, timeout=5) for _ in range(3)]
-            try:
-                assert all(served_request(c).startswith(b"HTTP/1.1 403") for c in held)   # all accepted
-                started = time.monotonic()
-                closed, received = closed_within(address, b"", 3.0)
-                assert closed and received.startswith(b"HTTP/1.1 503") and b"too many" in received
-                assert time.monotonic() - started < 2.0
-                assert served_request(held[1]).startswith(b"HTTP/1.1 403")
-                held.pop(0).close()
-                whole = b"GET /static/live.css HTTP/1.1\r\n%s\r\nConnection: close\r\n\r\n" % host(address)
-                deadline = time.monotonic() + 3.0
-                while not (received := closed_within(address, whole, 2.0)[1]).startswith(b"HTTP/1.1 200"):
-                    assert time.monotonic() < deadline, received[:80]   # (the server sees the close soon)
-                    time.sleep(0.05)
-            finally:
-                for connection in held:
-                    connection.close()
-    finally:
-        study.close()
 
 
 def test_the_cap_per_address_leaves_room_for_others_and_spares_loopback():

@@ -212,30 +212,35 @@ def served_request(connection: socket.socket, path: str = "/api/me") -> bytes:
     return head + b"\r\n\r\n" + body
 
 
-def test_connections_beyond_the_cap_are_refused_at_once(tmp_path):
-    """With the study's connections all open, one more is answered 503 and closed as it is
-    accepted (it holds no descriptor until a deadline); those open are still served, and once
-    they close a new connection is served again."""
-    options = ServerOptions(request_seconds=5.0, max_connections=4)
+@pytest.mark.parametrize("options, held_count", [
+    (ServerOptions(request_seconds=5.0, max_connections=4), 4),
+    # one address's cap, the cap in all far from reached
+    (ServerOptions(request_seconds=5.0, max_connections=40, connections_per_address=3), 3)],
+    ids=["in-all", "per-address"])
+def test_connections_beyond_the_cap_are_refused_at_once(tmp_path, options, held_count):
+    """With the study's connections all open (or one address's), one more is answered 503 and
+    closed as it is accepted (it holds no descriptor until a deadline); those open are still
+    served, and once one closes a new connection is served again."""
     study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", options).open()
     try:
         with serving(study) as address:
-            held = [socket.create_connection(address, timeout=5) for _ in range(4)]
+            held = [socket.create_connection(address, timeout=5) for _ in range(held_count)]
             try:
                 assert all(served_request(c).startswith(b"HTTP/1.1 403") for c in held)   # all accepted
                 started = time.monotonic()
                 closed, received = closed_within(address, b"", 3.0)
                 assert closed and received.startswith(b"HTTP/1.1 503") and b"too many" in received
                 assert time.monotonic() - started < 2.0
-                assert served_request(held[0]).startswith(b"HTTP/1.1 403")
+                assert served_request(held[1]).startswith(b"HTTP/1.1 403")
+                held.pop(0).close()
+                whole = b"GET /static/live.css HTTP/1.1\r\n%s\r\nConnection: close\r\n\r\n" % host(address)
+                deadline = time.monotonic() + 3.0
+                while not (received := closed_within(address, whole, 2.0)[1]).startswith(b"HTTP/1.1 200"):
+                    assert time.monotonic() < deadline, received[:80]   # (the server sees the close soon)
+                    time.sleep(0.05)
             finally:
                 for connection in held:
                     connection.close()
-            whole = b"GET /static/live.css HTTP/1.1\r\n%s\r\nConnection: close\r\n\r\n" % host(address)
-            deadline = time.monotonic() + 3.0
-            while not (received := closed_within(address, whole, 2.0)[1]).startswith(b"HTTP/1.1 200"):
-                assert time.monotonic() < deadline, received[:80]   # (the server sees the closes soon)
-                time.sleep(0.05)
     finally:
         study.close()
 
