@@ -53,6 +53,11 @@ class ServeOptions:
         help="The address participants reach the study at behind a reverse proxy (e.g. "
         "https://study.example.org); repeatable. Pages from any other origin, and requests "
         "addressed to any other host, are refused.")
+    connections_per_address: int | None = option(
+        "--connections-per-address", type=Checked(ranges.CONNECTIONS_PER_ADDRESS), default=None,
+        help="Open connections one address may hold, this machine's included (default: two "
+        "stations' worth for another machine's address, no cap for this machine's). Raise it where "
+        "stations reach the study through one address: a NAT, or a reverse proxy on another host.")
 
     def server_options(self) -> ServerOptions:
         """The station's options, the public origins checked."""
@@ -60,7 +65,8 @@ class ServeOptions:
 
         return ServerOptions(pace=self.pace, resume_within=self.resume_within, warm_up=self.warm_up,
                              secure_cookies=self.secure_cookies,
-                             public_origins=checked_origins(self.public_origins))
+                             public_origins=checked_origins(self.public_origins),
+                             connections_per_address=self.connections_per_address)
 
     def consent(self) -> str:
         """The consent text: --consent's file, else the generic one."""

@@ -31,7 +31,7 @@ from trustroute.core import defaults
 from trustroute.core.dataset import part_path
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text
-from trustroute.core.ranges import PACE, RESUME_WITHIN, keep_checked
+from trustroute.core.ranges import CONNECTIONS_PER_ADDRESS, PACE, RESUME_WITHIN, keep_checked
 from trustroute.harness.live.attempts import AttemptLog
 from trustroute.harness.live.auth import Credentials, experimenter_credentials
 from trustroute.harness.live.session import Session, console_refusal
@@ -76,8 +76,11 @@ class ServerOptions:
     connections_per_address: int | None = None   # of those, from one address (None: guard.address_cap)
 
     def __post_init__(self) -> None:
-        """The pace and the resume window as `trustroute live` takes them (the ranges both check)."""
-        keep_checked(self, {"pace": PACE, "resume_within": RESUME_WITHIN})
+        """The pace, the resume window and one address's cap as `trustroute live` takes them (the
+        ranges both check)."""
+        keep_checked(self, {"pace": PACE, "resume_within": RESUME_WITHIN,
+                            "connections_per_address": CONNECTIONS_PER_ADDRESS},
+                     optional=("connections_per_address",))
 
 
 def warm_up_task(config: StudyConfig, participant: int) -> EpisodeTask:

@@ -290,7 +290,8 @@ COMPARED = {"synth": {"tau", "horizon", "time_limit", "work_limit", "node_budget
             "analyze": {"belief_source", "out"},
             "plan": {"sizes", "simulations", "tests", "alpha", "target", "driver", "population", "pilot",
                      "pilot_bootstrap", "seed", "out"},
-            "live": {"pace", "resume_within", "warm_up", "secure_cookies", "public_origins"},
+            "live": {"pace", "resume_within", "warm_up", "secure_cookies", "public_origins",
+                     "connections_per_address"},
             "fit": {"method", "iterations"}}
 
 
