@@ -28,7 +28,7 @@ import json
 import os
 import re
 from dataclasses import asdict, dataclass
-from pathlib import Path
+from pathlib import Path, PureWindowsPath
 
 from trustroute.core.dataset import CARLA_LOGS_ENGINE, MANIFEST_FILE
 from trustroute.core.errors import InputError
@@ -175,19 +175,30 @@ def found_spec(config: dict, index: int) -> Path | None:
     """The spec file `config.specs[index]` of a manifest's config (as `relocated_config` gives it,
     its `SPEC_SHA256` checked by `spec_paths`): at its recorded absolute path (a relative one is
     never read from where the command runs), or that path gone or changed (a study that stores no
-    copy of its inputs, moved to another machine), the packaged spec of its file name. A file is
+    copy of its inputs, moved to another machine), the packaged spec of its file name (that one
+    first where it has the recorded SHA-256: the same bytes). A file is
     read only when it is provably the spec the study ran: where the config records the spec's
     SHA-256 the file has it, and the packaged spec stands in only then; with no SHA-256 recorded,
     the file at the recorded path is the study's own. None otherwise: a file edited since, or a
     packaged spec that merely shares its name (a user's edited file of that name), is not it."""
     recorded, digest = Path(config["specs"][index]), _recorded_spec_sha256(config, index)
-    packaged = PACKAGED_SPECS / recorded.name
-    if recorded.is_absolute() and recorded.exists() and (
-            digest is None or (recorded.is_file() and sha256_of(recorded) == digest)):
-        return recorded
+    packaged = PACKAGED_SPECS / recorded_name(config["specs"][index])
+    # the packaged copy first where it has the recorded SHA-256: the same bytes, and one that
+    # `trustroute export` ships (a study imported by another install names that install's copy)
     if digest is not None and packaged.is_file() and sha256_of(packaged) == digest:
         return packaged
+    if recorded.is_absolute() and recorded.is_file() and (digest is None or sha256_of(recorded) == digest):
+        return recorded
     return None
+
+
+def recorded_name(value: str) -> str:
+    """The file name of a path a config records, written on this system or on Windows."""
+    return PureWindowsPath(value).name
+
+
+def _recorded_absolute(value: str) -> bool:
+    return Path(value).is_absolute() or PureWindowsPath(value).is_absolute()
 
 
 def _recorded_spec_sha256(config: dict, index: int) -> str | None:
@@ -197,12 +208,15 @@ def _recorded_spec_sha256(config: dict, index: int) -> str | None:
 
 def _check_spec_sha256(config: dict, study_dir: Path, fix: str) -> None:
     """The config's `SPEC_SHA256` is absent, null or a list of SHA-256 digests (64 lowercase hex
-    characters, or null for a spec with none), or InputError naming the manifest and the key."""
-    value = config.get(SPEC_SHA256)
+    characters, or null for a spec with none), one per spec, or InputError naming the manifest and
+    the key."""
+    value, specs = config.get(SPEC_SHA256), config.get("specs") or []
     if value is None:
         return
     if not isinstance(value, list):
         wrong = f"it is {json.dumps(value)[:72]}"
+    elif len(value) != len(specs):
+        wrong = f"it has {len(value)} entries for {len(specs)} specs"
     else:
         bad = [i for i, d in enumerate(value)
                if d is not None and not (isinstance(d, str) and SHA256_HEX.fullmatch(d))]
@@ -221,6 +235,11 @@ def spec_paths(manifest: dict, study_dir: Path) -> list[Path]:
     it finds none for, is an InputError naming the manifest, the key and the fix."""
     config = manifest.get("config") or {}
     _check_spec_sha256(config, study_dir, _spec_fix(manifest, study_dir))
+    for index, value in enumerate(config.get("specs") or []):
+        if not isinstance(value, str) or "\0" in value:
+            raise InputError(str(Path(study_dir) / manifest_wording(study_dir).manifest),
+                             f"config.specs[{index}]", f"not a spec's path: {json.dumps(value)[:72]}",
+                             _spec_fix(manifest, study_dir))
     paths = []
     for index in range(len(config.get("specs") or [])):
         path = found_spec(config, index)
@@ -241,7 +260,7 @@ def _unfound_spec(manifest: dict, study_dir: Path, index: int) -> InputError:
     """The error of `spec_paths` for `config.specs[index]`, which `found_spec` finds no file for."""
     config = manifest["config"]
     value, digest = config["specs"][index], _recorded_spec_sha256(config, index)
-    recorded, packaged = Path(value), PACKAGED_SPECS / Path(value).name
+    recorded, packaged = Path(value), PACKAGED_SPECS / recorded_name(value)
     said = manifest_wording(study_dir)
     differs = f"its SHA-256 differs from config.{SPEC_SHA256}[{index}]"
     if value == PATH_LEFT_OUT:
@@ -250,7 +269,8 @@ def _unfound_spec(manifest: dict, study_dir: Path, index: int) -> InputError:
         fix = ("ask the study's authors for the spec, or analyse the study directory the package was "
                "exported from")
         return InputError(str(Path(study_dir) / said.manifest), f"config.specs[{index}]", problem, fix)
-    if not recorded.is_absolute():
+    absolute = _recorded_absolute(value)
+    if not absolute:
         problem = not_stored_nor_absolute("spec", value)
     elif recorded.exists():
         problem = f"the study's spec {value} changed since the study was run ({differs})"
@@ -260,20 +280,21 @@ def _unfound_spec(manifest: dict, study_dir: Path, index: int) -> InputError:
         problem += (f", and the packaged {packaged.name} is not provably the spec the study ran (" +
                     ("the manifest records no SHA-256 of it" if digest is None else differs) + ")")
     return InputError(str(Path(study_dir) / said.manifest), f"config.specs[{index}]", problem,
-                      _spec_fix(manifest, study_dir, value if recorded.is_absolute() else None))
+                      _spec_fix(manifest, study_dir, restore=absolute))
 
 
-def _spec_fix(manifest: dict, study_dir: Path, restore: str | None = None) -> str:
-    """The fix of a config's spec that cannot be read (`restore`: its absolute path, where the file
-    the study ran can be put back; None: the config is at fault, a relative path or a malformed
+def _spec_fix(manifest: dict, study_dir: Path, restore: bool = False) -> str:
+    """The fix of a config's spec that cannot be read (`restore`: at an absolute path, where the
+    file the study ran can be put back; else the config is at fault, a relative path or a malformed
     `SPEC_SHA256`): a package's is to get it again. A study `trustroute import carla-logs` wrote
     (one imported before the import recorded its specs' SHA-256 among them) can be imported again,
     which writes its manifest anew."""
     said = manifest_wording(study_dir)
     if said is _PACKAGE_WORDING:
         return said.config_fix
-    fix = (said.config_fix if restore is None else
-           f"restore {restore} (the spec the study was run with), or analyse the study where it was made")
+    # the path is in the problem, not here: a fix is cut at 300 characters
+    fix = (said.config_fix if not restore else
+           "put the spec the study was run with back at that path, or analyse the study where it was made")
     if manifest.get("engine") != CARLA_LOGS_ENGINE:
         return fix
     return (f"{fix}, or import it again (`trustroute import carla-logs SOURCE --out DIR`), which records "

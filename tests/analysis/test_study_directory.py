@@ -17,7 +17,7 @@ from trustroute.analysis.study_directory import load_study
 from trustroute.core.dataset import EPISODES_FILE, MANIFEST_FILE, ROADS_FILE
 from trustroute.core.errors import InputError
 from trustroute.core.packaged import PACKAGED_SPECS
-from trustroute.harness.study.inputs import MANIFEST_FIX
+from trustroute.harness.study.inputs import MANIFEST_FIX, found_spec
 
 # (table, edit, column, what the message says)
 UNKNOWN_NAMES = {
@@ -121,7 +121,7 @@ def test_a_gone_spec_is_not_read_as_the_packaged_one_of_its_name_unless_it_is_th
     said = info.value
     assert (said.source, said.place) == (str(study / MANIFEST_FILE), "config.specs[0]")
     assert f"the study's spec {gone} is gone" in said.problem and "not provably" in said.problem
-    assert said.fix.startswith(f"restore {gone}")
+    assert said.fix.startswith("put the spec the study was run with back at that path")
     # a relative path is never read where the command runs, even where a phi1.toml lies
     monkeypatch.chdir(tmp_path / "study")
     Path("phi1.toml").write_text(edited)
@@ -160,26 +160,71 @@ def test_a_spec_edited_at_its_recorded_path_since_the_study_ran_is_not_read(tmp_
     assert said.problem.startswith(f"the study's spec {lab} changed since the study was run (its SHA-256 "
                                    "differs from config.spec_sha256[0]), and the packaged phi1.toml is not "
                                    "provably the spec the study ran")
-    assert said.fix.startswith(f"restore {lab} (the spec the study was run with)")
+    assert said.fix.startswith("put the spec the study was run with back at that path")
     _, episodes, _ = load_study(_real_study_naming(tmp_path / "packaged", str(lab), shipped))
     assert set(episodes["spec"]) == {"phi1", "phi2"}
 
 
 @pytest.mark.parametrize("recorded", [{"phi1.toml": "x"}, 5, True, "be0ef16eef1fe63f0570b5cc5087d542",
-                                      ["not a digest", None], [None, "6F43B9CB" * 8]])
+                                      ["not a digest", None], [None, "6F43B9CB" * 8],
+                                      [None], [None, None, None]])
 def test_a_spec_sha256_that_is_no_list_of_digests_is_one_line(recorded, tmp_path, capsys):
-    """`config.spec_sha256` of another type, or with an entry that is no SHA-256, is refused before any
-    spec is looked for: one line naming the manifest and the key, exit 2 (never a traceback, nor a
-    string read a character at a time); an imported study's fix says it can be imported again."""
+    """`config.spec_sha256` of another type, with an entry that is no SHA-256, or not one entry per
+    spec (a shorter list would leave a spec unverified), is refused before any spec is looked for:
+    one line naming the manifest and the key, exit 2 (never a traceback, nor a string read a
+    character at a time); an imported study's fix says it can be imported again."""
     study = _real_study_naming(tmp_path, "policies/specs/phi1.toml", [])
     manifest = json.loads((study / MANIFEST_FILE).read_text())
     manifest["config"]["spec_sha256"] = recorded
     (study / MANIFEST_FILE).write_text(json.dumps(manifest))
     code, out, err = run_cli(capsys, "analyze", str(study), "--json")
-    wrong = json.dumps(recorded)[:20] if not isinstance(recorded, list) else "its entry ["
+    wrong = (json.dumps(recorded)[:20] if not isinstance(recorded, list) else
+             f"it has {len(recorded)} entries for 2 specs" if len(recorded) != 2 else "its entry [")
     assert_one_line_error(code, err, f"{study / MANIFEST_FILE}: config.spec_sha256: not a list of the specs' "
                           "SHA-256", wrong, MANIFEST_FIX, REIMPORT)
     assert out == ""
+
+
+@pytest.mark.parametrize("entry", [None, 7, "phi1\u0000.toml"])
+def test_a_spec_entry_that_is_no_path_is_one_line(entry, tmp_path, capsys):
+    """A `config.specs` entry that is no path (null, a number, a NUL in it) is one line naming the
+    manifest and its place, exit 2, not a traceback."""
+    study = _real_study_naming(tmp_path, entry, None)
+    code, out, err = run_cli(capsys, "analyze", str(study), "--json")
+    assert_one_line_error(code, err, f"{study / MANIFEST_FILE}: config.specs[0]: not a spec's path")
+    assert out == ""
+
+
+def test_a_spec_recorded_on_windows_is_matched_by_its_file_name(tmp_path):
+    """A study imported on Windows records `C:\\...\\phi1.toml`: an absolute path gone here, whose
+    file name is phi1.toml, so the packaged phi1.toml with the recorded SHA-256 stands in; without
+    a SHA-256 recorded the path is said gone, not relative."""
+    windows = "C:\\Users\\lab\\trustroute\\policies\\specs\\phi1.toml"
+    shipped = json.loads((REAL_STUDY / MANIFEST_FILE).read_text())["config"]["spec_sha256"]
+    _, episodes, _ = load_study(_real_study_naming(tmp_path / "hashed", windows, shipped))
+    assert set(episodes["spec"]) == {"phi1", "phi2"}
+    with pytest.raises(InputError) as info:
+        load_study(_real_study_naming(tmp_path / "unhashed", windows, None))
+    assert info.value.problem.startswith(f"the study's spec {windows} is gone")
+
+
+def test_the_packaged_copy_with_the_recorded_sha256_is_the_one_found_and_exported(tmp_path, capsys):
+    """A study imported by another install names that install's spec, byte for byte the packaged
+    one (the recorded SHA-256): the packaged copy is the one found, so the export ships it rather
+    than leave the spec out of the package."""
+    other_install = tmp_path / "other" / "policies" / "specs" / "phi1.toml"
+    other_install.parent.mkdir(parents=True)
+    other_install.write_bytes((PACKAGED_SPECS / "phi1.toml").read_bytes())
+    shipped = json.loads((REAL_STUDY / MANIFEST_FILE).read_text())["config"]["spec_sha256"]
+    study = _real_study_naming(tmp_path, str(other_install), shipped)
+    config = json.loads((study / MANIFEST_FILE).read_text())["config"]
+    assert found_spec(config, 0) == PACKAGED_SPECS / "phi1.toml"
+    package = tmp_path / "package"
+    code, _, err = run_cli(capsys, "export", str(study), "--out", str(package))
+    assert code == 0, err
+    readme = (package / "README.md").read_text()
+    assert "config.specs[0]" not in readme   # nothing left out
+    assert any(path.name == "phi1.toml" for path in (package / "inputs").rglob("*.toml"))
 
 
 def test_a_relative_spec_path_is_said_to_be_no_stored_input_nor_absolute_not_gone(model_study, tmp_path):
