@@ -66,6 +66,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from uvicorn.protocols.http.h11_impl import H11Protocol
 from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 
+from trustroute.core import defaults
 from trustroute.core.errors import InputError
 from trustroute.harness.live.protocol import (
     MAX_BODY_BYTES,
@@ -78,7 +79,7 @@ from trustroute.harness.live.protocol import (
 MAX_SOCKETS = 2        # open websockets per participant: the live one and the one replacing it
 OPEN_BURST = 5         # new websockets a participant may open at once ...
 OPEN_RATE = 0.5        # ... and per second after that
-CONNECTIONS_PER_PARTICIPANT = 8   # their 2 websockets and the 6 HTTP connections a browser keeps to a host
+CONNECTIONS_PER_PARTICIPANT = defaults.LIVE_CONNECTIONS_PER_BROWSER   # one browser's, a station's
 CONNECTIONS_SPARE = 32            # the experimenter's console, scripts, connections being closed
 CONNECTIONS_PER_ADDRESS = 2 * CONNECTIONS_PER_PARTICIPANT   # from one address other than loopback
 FULL_TEXT = b"too many open connections; try again later"

@@ -81,6 +81,7 @@ PLAN_DEFAULT_TESTS: Final = PLAN_TESTS[:3]
 PILOT_BOOTSTRAP = 50
 
 # live studies (`trustroute live`, harness/live/server.py ServerOptions)
+LIVE_CONNECTIONS_PER_BROWSER = 8    # a station: its 2 websockets, the 6 HTTP connections a browser keeps
 LIVE_PACE = 1.0                      # simulated seconds per wall-clock second (1: real time)
 LIVE_RESUME_WITHIN = 120.0           # seconds a disconnected participant has to resume an episode
 LIVE_WARM_UP = True                  # a warm-up drive before each participant's trials

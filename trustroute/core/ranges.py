@@ -164,10 +164,11 @@ PACE = OptionRange("--pace", Number(minimum=0.0, maximum=10_000.0, open_below=Tr
 RESUME_WITHIN = OptionRange("--resume-within", Number(minimum=0.0, maximum=86_400.0, open_below=True),
                             "pass seconds above 0, at most 86400 (a day), e.g. --resume-within "
                             f"{defaults.LIVE_RESUME_WITHIN:g}")
+# at least one browser's connections: the cap holds this machine's too, the console's browser included
 CONNECTIONS_PER_ADDRESS = OptionRange(
-    "--connections-per-address", Integer(minimum=1, maximum=1_000_000),
-    "pass a count of at least 1, e.g. --connections-per-address 256 where stations share one address "
-    "(a NAT or a proxy on another host)")
+    "--connections-per-address", Integer(minimum=defaults.LIVE_CONNECTIONS_PER_BROWSER, maximum=1_000_000),
+    f"pass a count from {defaults.LIVE_CONNECTIONS_PER_BROWSER} (one browser's connections) to 1000000, "
+    "e.g. --connections-per-address 256 where stations share one address (a NAT or a proxy on another host)")
 # fitting (`trustroute fit`, analysis/fitting/driver_model.py fit_study)
 ITERATIONS = OptionRange("--iterations", Integer(minimum=1, maximum=100_000),
                          f"pass 1 to 100000 iterations, e.g. --iterations {defaults.FIT_ITERATIONS}")

@@ -8,6 +8,7 @@ import base64
 import contextlib
 import os
 import re
+import socket
 
 import httpx
 import pytest
@@ -17,13 +18,18 @@ from websockets.sync.client import connect
 from tests.cli import run_cli
 from trustroute.core.errors import InputError
 from trustroute.harness.commands.live import ServeOptions
-from trustroute.harness.live.guard import CONNECTIONS_PER_ADDRESS, address_cap, connection_cap
+from trustroute.harness.live.guard import (
+    CONNECTIONS_PER_ADDRESS,
+    CONNECTIONS_PER_PARTICIPANT,
+    address_cap,
+    connection_cap,
+)
 from trustroute.harness.live.protocol import MAX_MESSAGE_BYTES
 from trustroute.harness.live.server import LiveStudy, ServerOptions
 
 from .conftest import experimenter, live_server_of, serving, tiny_config
 from .test_live_cli import write_config
-from .test_live_sessions import closed_within, host
+from .test_live_sessions import closed_within, host, served_request
 
 pytestmark = pytest.mark.wallclock
 
@@ -83,9 +89,10 @@ def test_the_cap_per_address_leaves_room_for_others_and_spares_loopback():
 
 def test_an_address_counts_its_websockets_toward_its_cap(tmp_path):
     """Websockets held from one address count toward its cap as its HTTP connections do: with two
-    stations' sockets open under a cap of 2, a third connection from the address is answered 503
-    at once, the cap in all far from reached."""
-    options = ServerOptions(request_seconds=5.0, max_connections=40, connections_per_address=2)
+    stations' sockets and the rest of the cap in HTTP connections open, one more connection from
+    the address is answered 503 at once, the cap in all far from reached."""
+    options = ServerOptions(request_seconds=5.0, max_connections=40,
+                            connections_per_address=CONNECTIONS_PER_PARTICIPANT)
     study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", options).open()
     try:
         tokens = [study.create_participant()[1] for _ in range(2)]
@@ -93,22 +100,26 @@ def test_an_address_counts_its_websockets_toward_its_cap(tmp_path):
             for token in tokens:
                 held.enter_context(connect(f"ws://{address[0]}:{address[1]}/ws", open_timeout=5,
                                            additional_headers={"Authorization": f"Bearer {token}"}))
+            for _ in range(CONNECTIONS_PER_PARTICIPANT - len(tokens)):
+                connection = held.enter_context(socket.create_connection(address, timeout=5))
+                assert served_request(connection).startswith(b"HTTP/1.1 403")   # accepted
             closed, received = closed_within(address, b"", 3.0)
             assert closed and received.startswith(b"HTTP/1.1 503") and b"too many" in received
     finally:
         study.close()
 
 
-def test_one_address_s_cap_is_at_least_one_at_every_door(tmp_path, capsys):
+def test_one_address_s_cap_is_at_least_a_browser_s_at_every_door(tmp_path, capsys):
     """`--connections-per-address` and `ServerOptions.connections_per_address` take a count of at
-    least 1 (0 would refuse every client, the console's too): one line, exit 2, as its range says;
-    a count given reaches the server's options."""
-    for value in ("0", "-3", "1.5"):
+    least one browser's connections (the cap holds this machine's address too, so fewer would
+    starve the console's browser): one line, exit 2, as its range says; a count given reaches the
+    server's options."""
+    for value in ("0", "-3", "1.5", str(CONNECTIONS_PER_PARTICIPANT - 1)):
         code, out, err = run_cli(capsys, "live", write_config(tmp_path), "--out", str(tmp_path / "study"),
                                  "--connections-per-address", value)
         assert code == 2 and err.count("\n") == 1 and "--connections-per-address" in err and out == "", err
     with pytest.raises(InputError, match="connections-per-address"):
-        ServerOptions(connections_per_address=0)
+        ServerOptions(connections_per_address=CONNECTIONS_PER_PARTICIPANT - 1)
     assert ServeOptions(connections_per_address=256).server_options().connections_per_address == 256
     assert not (tmp_path / "study").exists()
 

@@ -215,7 +215,8 @@ def served_request(connection: socket.socket, path: str = "/api/me") -> bytes:
 @pytest.mark.parametrize("options, held_count", [
     (ServerOptions(request_seconds=5.0, max_connections=4), 4),
     # one address's cap, the cap in all far from reached
-    (ServerOptions(request_seconds=5.0, max_connections=40, connections_per_address=3), 3)],
+    (ServerOptions(request_seconds=5.0, max_connections=40,
+                   connections_per_address=CONNECTIONS_PER_PARTICIPANT), CONNECTIONS_PER_PARTICIPANT)],
     ids=["in-all", "per-address"])
 def test_connections_beyond_the_cap_are_refused_at_once(tmp_path, options, held_count):
     """With the study's connections all open (or one address's), one more is answered 503 and
