@@ -5,8 +5,6 @@ saying why not.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pandas as pd
 
 from trustroute.analysis import paper_figures
@@ -15,7 +13,7 @@ from trustroute.analysis.statistics import rate_interval
 from trustroute.analysis.study.design import study_participants
 from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.core.wording import counted
-from trustroute.harness.study.inputs import found_spec
+from trustroute.harness.study.inputs import found_spec, recorded_stem
 from trustroute.networks.town import load_town
 from trustroute.policies.logic.spec import load_spec
 
@@ -32,7 +30,7 @@ def is_paper_comparable(manifest: dict, episodes: pd.DataFrame) -> tuple[bool, s
     if town.content_hash != default_town.content_hash:
         reasons.append("another town")
     for name in ("phi1", "phi2"):
-        ours = [i for i, p in enumerate(config.get("specs", [])) if Path(p).stem == name]
+        ours = [i for i, p in enumerate(config.get("specs", [])) if recorded_stem(p) == name]
         found = found_spec(config, ours[0]) if ours else None   # None: not provably any spec
         if (
             found is None

@@ -28,13 +28,14 @@ import json
 import os
 import re
 from dataclasses import asdict, dataclass
-from pathlib import Path, PureWindowsPath
+from pathlib import Path, PurePath, PureWindowsPath
 
 from trustroute.core.dataset import CARLA_LOGS_ENGINE, MANIFEST_FILE
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_bytes
 from trustroute.core.package import PACKAGE_MANIFEST_FILE, SUMS_FILE, TAMPERED_FIX, is_package, sha256_of
 from trustroute.core.packaged import PACKAGED_SPECS
+from trustroute.core.wording import counted
 from trustroute.harness.study.config import NAMED_CONDITIONS
 from trustroute.harness.study.context import (
     StudyContext,
@@ -193,12 +194,20 @@ def found_spec(config: dict, index: int) -> Path | None:
 
 
 def recorded_name(value: str) -> str:
-    """The file name of a path a config records, written on this system or on Windows."""
-    return PureWindowsPath(value).name
+    """The file name of a path a config records: a Windows path's (a drive or a share, as a study
+    imported on Windows records it) by Windows' separators, any other by this system's (where a
+    backslash may be part of a file name)."""
+    windows = PureWindowsPath(value)
+    return windows.name if windows.drive and not Path(value).is_absolute() else Path(value).name
+
+
+def recorded_stem(value: str) -> str:
+    """`recorded_name` without its suffix: the name a spec's file gives it."""
+    return PurePath(recorded_name(value)).stem
 
 
 def _recorded_absolute(value: str) -> bool:
-    return Path(value).is_absolute() or PureWindowsPath(value).is_absolute()
+    return Path(value).is_absolute() or bool(PureWindowsPath(value).drive)
 
 
 def _recorded_spec_sha256(config: dict, index: int) -> str | None:
@@ -216,7 +225,7 @@ def _check_spec_sha256(config: dict, study_dir: Path, fix: str) -> None:
     if not isinstance(value, list):
         wrong = f"it is {json.dumps(value)[:72]}"
     elif len(value) != len(specs):
-        wrong = f"it has {len(value)} entries for {len(specs)} specs"
+        wrong = f"it has {counted(len(value), 'entry', 'entries')} for {counted(len(specs), 'spec')}"
     else:
         bad = [i for i, d in enumerate(value)
                if d is not None and not (isinstance(d, str) and SHA256_HEX.fullmatch(d))]
@@ -234,11 +243,14 @@ def spec_paths(manifest: dict, study_dir: Path) -> list[Path]:
     `study_dir`; a config's malformed `SPEC_SHA256`, checked before any spec is looked for, or a spec
     it finds none for, is an InputError naming the manifest, the key and the fix."""
     config = manifest.get("config") or {}
+    shown = str(Path(study_dir) / manifest_wording(study_dir).manifest)
+    if not isinstance(config.get("specs") or [], list):
+        raise InputError(shown, "config.specs", "not a list of spec paths: "
+                         f"{json.dumps(config['specs'])[:72]}", _spec_fix(manifest, study_dir))
     _check_spec_sha256(config, study_dir, _spec_fix(manifest, study_dir))
     for index, value in enumerate(config.get("specs") or []):
         if not isinstance(value, str) or "\0" in value:
-            raise InputError(str(Path(study_dir) / manifest_wording(study_dir).manifest),
-                             f"config.specs[{index}]", f"not a spec's path: {json.dumps(value)[:72]}",
+            raise InputError(shown, f"config.specs[{index}]", f"not a spec's path: {json.dumps(value)[:72]}",
                              _spec_fix(manifest, study_dir))
     paths = []
     for index in range(len(config.get("specs") or [])):

@@ -13,10 +13,12 @@ import pytest
 
 from tests.cli import assert_one_line_error, run_cli
 from tests.study_tables import set_values, study_copy
+from trustroute.analysis.study.paper_comparison import is_paper_comparable
 from trustroute.analysis.study_directory import load_study
 from trustroute.core.dataset import EPISODES_FILE, MANIFEST_FILE, ROADS_FILE
 from trustroute.core.errors import InputError
 from trustroute.core.packaged import PACKAGED_SPECS
+from trustroute.core.wording import counted
 from trustroute.harness.study.inputs import MANIFEST_FIX, found_spec
 
 # (table, edit, column, what the message says)
@@ -179,7 +181,8 @@ def test_a_spec_sha256_that_is_no_list_of_digests_is_one_line(recorded, tmp_path
     (study / MANIFEST_FILE).write_text(json.dumps(manifest))
     code, out, err = run_cli(capsys, "analyze", str(study), "--json")
     wrong = (json.dumps(recorded)[:20] if not isinstance(recorded, list) else
-             f"it has {len(recorded)} entries for 2 specs" if len(recorded) != 2 else "its entry [")
+             f"it has {counted(len(recorded), 'entry', 'entries')} for 2 specs" if len(recorded) != 2 else
+             "its entry [")
     assert_one_line_error(code, err, f"{study / MANIFEST_FILE}: config.spec_sha256: not a list of the specs' "
                           "SHA-256", wrong, MANIFEST_FIX, REIMPORT)
     assert out == ""
@@ -201,11 +204,35 @@ def test_a_spec_recorded_on_windows_is_matched_by_its_file_name(tmp_path):
     a SHA-256 recorded the path is said gone, not relative."""
     windows = "C:\\Users\\lab\\trustroute\\policies\\specs\\phi1.toml"
     shipped = json.loads((REAL_STUDY / MANIFEST_FILE).read_text())["config"]["spec_sha256"]
-    _, episodes, _ = load_study(_real_study_naming(tmp_path / "hashed", windows, shipped))
+    manifest, episodes, _ = load_study(_real_study_naming(tmp_path / "hashed", windows, shipped))
     assert set(episodes["spec"]) == {"phi1", "phi2"}
+    assert is_paper_comparable(manifest, episodes)[0]   # its phi1 is the paper's, by its file name
     with pytest.raises(InputError) as info:
         load_study(_real_study_naming(tmp_path / "unhashed", windows, None))
     assert info.value.problem.startswith(f"the study's spec {windows} is gone")
+
+
+def test_a_backslash_in_a_file_name_here_is_part_of_the_name(tmp_path):
+    """On this system a backslash may be part of a file name: `a\\phi1.toml` is not read as a
+    Windows path to phi1.toml, so the packaged phi1.toml does not stand in for it by name; the file
+    itself, with the recorded SHA-256, is the one found."""
+    spec = tmp_path / "a\\phi1.toml"
+    spec.write_bytes((PACKAGED_SPECS / "phi1.toml").read_bytes())
+    config = {"specs": [str(spec)], "spec_sha256": [hashlib.sha256(spec.read_bytes()).hexdigest()]}
+    assert found_spec(config, 0) == spec
+
+
+@pytest.mark.parametrize("specs", ["phi1.toml", {"phi1": "phi1.toml"}])
+def test_specs_that_are_no_list_are_one_line(specs, tmp_path, capsys):
+    """`config.specs` that is no list is one line naming `config.specs`, exit 2 (never read a
+    character or a key at a time)."""
+    study = _real_study_naming(tmp_path, "policies/specs/phi1.toml", None)
+    manifest = json.loads((study / MANIFEST_FILE).read_text())
+    manifest["config"]["specs"] = specs
+    (study / MANIFEST_FILE).write_text(json.dumps(manifest))
+    code, out, err = run_cli(capsys, "analyze", str(study), "--json")
+    assert_one_line_error(code, err, f"{study / MANIFEST_FILE}: config.specs: not a list of spec paths")
+    assert out == ""
 
 
 def test_the_packaged_copy_with_the_recorded_sha256_is_the_one_found_and_exported(tmp_path, capsys):
