@@ -16,19 +16,18 @@ from __future__ import annotations
 
 import hashlib
 import math
-import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
 from trustroute.core.errors import InputError
+from trustroute.core.package import SHA256_HEX
 from trustroute.core.validation import check_keys
 from trustroute.core.wording import shown_value
 from trustroute.networks.road import Road
 
 EXTRA_TOWN_KEYS: tuple[str, ...] = ("one_way", "geometry", "sumo_net", "turns")
 GEOMETRY_KEYS: tuple[str, ...] = ("shape", "length", "edges", "street")
-SHA256 = re.compile(r"[0-9a-f]{64}")
 
 
 @dataclass(frozen=True)
@@ -162,7 +161,7 @@ def parse_sumo_net(data: Mapping, path: str) -> SumoNetRef | None:
     if raw is None:
         return None
     if not (isinstance(raw, dict) and set(raw) == {"file", "sha256"} and isinstance(raw["file"], str)
-            and raw["file"] and isinstance(raw["sha256"], str) and SHA256.fullmatch(raw["sha256"])):
+            and raw["file"] and isinstance(raw["sha256"], str) and SHA256_HEX.fullmatch(raw["sha256"])):
         raise InputError(path, "sumo_net", "expected {\"file\": path, \"sha256\": 64 lowercase hex digits}",
                          "re-import the town with trustroute town import, or remove sumo_net")
     return SumoNetRef(file=raw["file"], sha256=raw["sha256"])

@@ -453,7 +453,7 @@ def guarded_protocol(request_seconds: float, max_connections: int,
 class GuardedWebSocketProtocol(WebSocketsSansIOProtocol):
     """uvicorn's websocket protocol (the one it picks with `websockets` installed), whose
     handshake refused by an HTTP response (ASGI's websocket denial response) counts as completed:
-    uvicorn's logs "ASGI callable returned without completing handshake" for each."""
+    else uvicorn logs "ASGI callable returned without completing handshake" for each."""
 
     async def send(self, message: Message) -> None:  # type: ignore[override]
         await super().send(message)  # type: ignore[arg-type]

@@ -26,14 +26,20 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import re
 from dataclasses import asdict, dataclass
 from pathlib import Path, PurePath, PureWindowsPath
 
 from trustroute.core.dataset import CARLA_LOGS_ENGINE, MANIFEST_FILE
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_bytes
-from trustroute.core.package import PACKAGE_MANIFEST_FILE, SUMS_FILE, TAMPERED_FIX, is_package, sha256_of
+from trustroute.core.package import (
+    PACKAGE_MANIFEST_FILE,
+    SHA256_HEX,
+    SUMS_FILE,
+    TAMPERED_FIX,
+    is_package,
+    sha256_of,
+)
 from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.core.wording import counted
 from trustroute.harness.study.config import NAMED_CONDITIONS
@@ -57,7 +63,6 @@ MANIFEST_FIX = f"restore {MANIFEST_FILE} from the study directory's original cop
 # it): the SHA-256 of each of its specs, in the order of `specs`, by which `found_spec` knows a file
 # for the one the study read, at its recorded path or, that path gone, the packaged spec of its name.
 SPEC_SHA256 = "spec_sha256"
-SHA256_HEX = re.compile(r"[0-9a-f]{64}")   # a SHA-256 as `sha256_of` writes it
 # What the export (export_inputs.py) writes, in a package's config and copied files, in place of an
 # absolute path naming nothing the package holds: a spec so named is one the package does not hold.
 PATH_LEFT_OUT = "<a path on the lab's disk, left out>"
@@ -193,12 +198,17 @@ def found_spec(config: dict, index: int) -> Path | None:
     return None
 
 
+def _on_windows(value: str) -> bool:
+    """Whether a path a config records was written on Windows (a drive or a share, as a study
+    imported there records it), not a path of this system's (where a backslash may be part of a
+    file name)."""
+    return bool(PureWindowsPath(value).drive) and not Path(value).is_absolute()
+
+
 def recorded_name(value: str) -> str:
-    """The file name of a path a config records: a Windows path's (a drive or a share, as a study
-    imported on Windows records it) by Windows' separators, any other by this system's (where a
-    backslash may be part of a file name)."""
-    windows = PureWindowsPath(value)
-    return windows.name if windows.drive and not Path(value).is_absolute() else Path(value).name
+    """The file name of a path a config records, by the separators of the system it was written on
+    (`_on_windows`)."""
+    return PureWindowsPath(value).name if _on_windows(value) else Path(value).name
 
 
 def recorded_stem(value: str) -> str:
@@ -207,7 +217,7 @@ def recorded_stem(value: str) -> str:
 
 
 def _recorded_absolute(value: str) -> bool:
-    return Path(value).is_absolute() or bool(PureWindowsPath(value).drive)
+    return Path(value).is_absolute() or _on_windows(value)
 
 
 def _recorded_spec_sha256(config: dict, index: int) -> str | None:
@@ -273,14 +283,14 @@ def _unfound_spec(manifest: dict, study_dir: Path, index: int) -> InputError:
     config = manifest["config"]
     value, digest = config["specs"][index], _recorded_spec_sha256(config, index)
     recorded, packaged = Path(value), PACKAGED_SPECS / recorded_name(value)
-    said = manifest_wording(study_dir)
+    shown, place = str(Path(study_dir) / manifest_wording(study_dir).manifest), f"config.specs[{index}]"
     differs = f"its SHA-256 differs from config.{SPEC_SHA256}[{index}]"
     if value == PATH_LEFT_OUT:
         problem = "the export left out this spec of the study (a file on the lab's disk), so the package "
         problem += "cannot be analysed again without it"
         fix = ("ask the study's authors for the spec, or analyse the study directory the package was "
                "exported from")
-        return InputError(str(Path(study_dir) / said.manifest), f"config.specs[{index}]", problem, fix)
+        return InputError(shown, place, problem, fix)
     absolute = _recorded_absolute(value)
     if not absolute:
         problem = not_stored_nor_absolute("spec", value)
@@ -291,8 +301,7 @@ def _unfound_spec(manifest: dict, study_dir: Path, index: int) -> InputError:
     if packaged.is_file() and packaged != recorded:
         problem += (f", and the packaged {packaged.name} is not provably the spec the study ran (" +
                     ("the manifest records no SHA-256 of it" if digest is None else differs) + ")")
-    return InputError(str(Path(study_dir) / said.manifest), f"config.specs[{index}]", problem,
-                      _spec_fix(manifest, study_dir, restore=absolute))
+    return InputError(shown, place, problem, _spec_fix(manifest, study_dir, restore=absolute))
 
 
 def _spec_fix(manifest: dict, study_dir: Path, restore: bool = False) -> str:

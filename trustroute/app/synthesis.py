@@ -250,8 +250,9 @@ def evaluate_problem(problem: Problem, make_policy: Callable[[], RoutingPolicy],
     policy = make_policy()
     if problem.population is not None:
         value, types = evaluate_population(problem, policy, settings)
-        return EvaluationOutcome.of(value, types, fallback_only(policy))
-    return EvaluationOutcome.of(evaluate_single(problem, policy, settings), None, fallback_only(policy))
+    else:
+        value, types = evaluate_single(problem, policy, settings), None
+    return EvaluationOutcome.of(value, types, fallback_only(policy))
 
 
 @dataclass(frozen=True)

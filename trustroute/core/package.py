@@ -15,6 +15,7 @@ there is refused, and a policy cache there is the user's.
 from __future__ import annotations
 
 import hashlib
+import re
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -115,6 +116,9 @@ def package_schemas(schema: pa.Schema, table: str) -> tuple[pa.Schema, ...]:
 def package_fix(folder: Path) -> str | None:
     """The fix to show for `folder` passed as a study directory when it is a package, else None."""
     return PACKAGE_FIX if is_package(folder) else None
+
+
+SHA256_HEX = re.compile(r"[0-9a-f]{64}")   # a SHA-256 as `sha256_of` writes it
 
 
 def sha256_of(path: Path) -> str:
