@@ -186,15 +186,18 @@ def test_a_road_whose_incident_is_over_is_watched_no_more(setup, net_path, monke
     truck gone after the meeting), the episode stops stepping it: at most the one step that finds
     it so enters `watch` with it over. The person alone is over for about 16 steps of each episode."""
     watch = SumoEpisode.watch
-    over = Counter()   # (episode, road index) -> steps that watched the road with its incident over
+    over = Counter()   # (episode's seed, road index) -> steps that watched the road with its incident over
+    seed = 0   # the episode under way (not its id(): an episode freed gives its id to a later one)
 
     def watched(self, run, ego):
         if run.decided and not math.isnan(run.passed_time) and run.incident.done():
-            over[id(self), run.index] += 1
+            over[seed, run.index] += 1
         watch(self, run, ego)
 
     monkeypatch.setattr(SumoEpisode, "watch", watched)
-    episodes = [_episode(setup, net_path, seed) for seed in range(6)]
+    episodes = []
+    for seed in range(6):
+        episodes.append(_episode(setup, net_path, seed))
     assert sum(len(record.incidents) for record in episodes) >= 12
     assert len(over) >= 6 and max(over.values()) == 1
 
